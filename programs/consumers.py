@@ -1,0 +1,113 @@
+"""Live run output and the live list of runs, as HTML fragments for htmx's ws extension."""
+
+import asyncio
+
+from channels.db import database_sync_to_async
+from channels.generic.websocket import AsyncWebsocketConsumer
+from django.http import Http404
+from django.template.loader import render_to_string
+from django.utils.html import escape
+
+from programs.access import get_run_for_user
+from programs.runlog import render_lines, tail
+from programs.views import run_tables_context
+from robots.bus import RUNS_GROUP, run_group
+
+LIST_REFRESH_INTERVAL = 0.5
+
+
+@database_sync_to_async
+def _get_run(user, run_id):
+    try:
+        return get_run_for_user(user, run_id)
+    except Http404:
+        return None
+
+
+def skipped_line(count: int) -> str:
+    text = f"… {count} line(s) not shown live: the full log has them (Download log)"
+    return f'<div class="ln s">{escape(text)}</div>'
+
+
+class RunConsumer(AsyncWebsocketConsumer):
+    """A run's output from its first line, then live; and its state as it changes."""
+
+    async def connect(self):
+        self.run = await _get_run(self.scope["user"], self.scope["url_route"]["kwargs"]["run_id"])
+        if self.run is None:
+            await self.close(code=4404)
+            return
+        self.group = run_group(self.run.pk)
+        # Join first, then read the file: lines already in it are skipped by offset.
+        await self.channel_layer.group_add(self.group, self.channel_name)
+        await self.accept()
+        lines, skipped, self.offset = await asyncio.to_thread(tail, self.run.log_path)
+        head = skipped_line(skipped) if skipped else ""
+        await self.send(f'<div id="log-lines">{head}{render_lines(lines)}</div>')
+        await self.send_status()
+
+    async def disconnect(self, code):
+        if getattr(self, "group", None):
+            await self.channel_layer.group_discard(self.group, self.channel_name)
+
+    async def run_output(self, event):
+        lines = [(tag, text) for offset, tag, text in event["lines"] if offset >= self.offset]
+        if not lines:
+            return
+        head = skipped_line(event["skipped"]) if event["skipped"] else ""
+        await self.send(
+            f'<div id="log-lines" hx-swap-oob="beforeend">{head}{render_lines(lines)}</div>'
+        )
+
+    async def run_state(self, event):
+        self.run = await _get_run(self.scope["user"], self.run.pk)
+        if self.run is None:  # access taken away
+            await self.close()
+            return
+        await self.send_status()
+
+    async def send_status(self):
+        html = await database_sync_to_async(render_to_string)(
+            "runs/_status.html", {"run": self.run, "oob": True}
+        )
+        await self.send(html)
+
+
+class RunListConsumer(AsyncWebsocketConsumer):
+    """The running and recent runs tables, re-rendered for this user when a run changes."""
+
+    async def connect(self):
+        if not self.scope["user"].is_authenticated:
+            await self.close(code=4401)
+            return
+        query = dict(
+            part.split("=", 1)
+            for part in self.scope["query_string"].decode().split("&")
+            if "=" in part
+        )
+        self.robot = query.get("robot") or None
+        self._pending: asyncio.TimerHandle | None = None
+        await self.channel_layer.group_add(RUNS_GROUP, self.channel_name)
+        await self.accept()
+
+    async def disconnect(self, code):
+        if self.scope["user"].is_authenticated:
+            await self.channel_layer.group_discard(RUNS_GROUP, self.channel_name)
+
+    async def runs_changed(self, event):
+        if self.robot and event.get("robot") != self.robot:
+            return
+        # Many runs ending at once become one refresh.
+        if self._pending is None:
+            self._pending = asyncio.get_running_loop().call_later(
+                LIST_REFRESH_INTERVAL, lambda: asyncio.ensure_future(self.refresh())
+            )
+
+    async def refresh(self):
+        self._pending = None
+        html = await database_sync_to_async(self._render)()
+        await self.send(html)
+
+    def _render(self) -> str:
+        context = run_tables_context(self.scope["user"], self.robot)
+        return render_to_string("runs/_tables.html", {**context, "oob": True})

@@ -1,0 +1,80 @@
+from django import forms
+
+from programs.languages import language_choices, language_for_filename
+from programs.models import MAX_SOURCE_BYTES, Program
+
+
+class NewProgramForm(forms.Form):
+    name = forms.CharField(max_length=100)
+    language = forms.ChoiceField(choices=language_choices)
+
+    def __init__(self, *args, owner=None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.owner = owner
+
+    def clean_name(self):
+        return unique_name(self.owner, self.cleaned_data["name"])
+
+
+class EditProgramForm(forms.Form):
+    source = forms.CharField(required=False, widget=forms.Textarea, strip=False)
+    language = forms.ChoiceField(choices=language_choices)
+    save_as = forms.CharField(max_length=100, required=False, label="Save as")
+
+    def clean_source(self):
+        # Browsers send CRLF from textareas; programs keep Unix line ends.
+        source = self.cleaned_data["source"].replace("\r\n", "\n")
+        if len(source.encode()) > MAX_SOURCE_BYTES:
+            raise forms.ValidationError(f"Programs are limited to {MAX_SOURCE_BYTES // 1024} KB.")
+        return source
+
+
+class UploadForm(forms.Form):
+    file = forms.FileField()
+    language = forms.ChoiceField(
+        choices=[("", "from the file name"), *language_choices()], required=False
+    )
+
+    def __init__(self, *args, owner=None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.owner = owner
+
+    def clean(self):
+        cleaned = super().clean()
+        upload = cleaned.get("file")
+        if upload is None:
+            return cleaned
+        if upload.size > MAX_SOURCE_BYTES:
+            raise forms.ValidationError(f"Programs are limited to {MAX_SOURCE_BYTES // 1024} KB.")
+        language = cleaned.get("language") or getattr(
+            language_for_filename(upload.name), "name", ""
+        )
+        if not language:
+            raise forms.ValidationError("Choose a language: the file name does not tell it.")
+        try:
+            source = upload.read().decode("utf-8")
+        except UnicodeDecodeError:
+            raise forms.ValidationError("The file is not UTF-8 text.") from None
+        stem = upload.name.rsplit("/", 1)[-1].rsplit(".", 1)[0][:100] or "uploaded"
+        cleaned.update(language=language, source=source.replace("\r\n", "\n"))
+        cleaned["name"] = free_name(self.owner, stem)
+        return cleaned
+
+
+def unique_name(owner, name: str) -> str:
+    name = name.strip()
+    if Program.objects.filter(owner=owner, name=name).exists():
+        raise forms.ValidationError(f"You already have a program named {name!r}.")
+    return name
+
+
+def free_name(owner, name: str) -> str:
+    """`name`, or `name (2)`, `name (3)`... whichever the owner does not have yet."""
+    taken = set(
+        Program.objects.filter(owner=owner, name__startswith=name).values_list("name", flat=True)
+    )
+    candidate, n = name, 1
+    while candidate in taken:
+        n += 1
+        candidate = f"{name} ({n})"
+    return candidate

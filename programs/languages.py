@@ -1,0 +1,115 @@
+"""The languages programs can be written in: one registry entry each.
+
+An entry says how to find the interpreter, how the launcher puts the Robot API client on the
+interpreter's search path, and what the editor and a new program start with. Nothing else in
+robotide names a language.
+"""
+
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+CLIENTS_DIR = Path(__file__).resolve().parent / "clients"
+# Programs never see the server's virtualenv: look for interpreters on the system path only.
+SYSTEM_PATH = "/usr/local/bin:/usr/bin:/bin"
+
+
+@dataclass(frozen=True)
+class Language:
+    name: str
+    label: str
+    extension: str
+    interpreter: tuple[str, ...]  # candidates, first found wins
+    args: tuple[str, ...] = ()
+    editor_mode: str = ""
+    install_hint: str = ""
+    template: str = ""
+    env: dict[str, str] = field(default_factory=dict)
+    # environment variable -> client folder (relative to CLIENTS_DIR) prepended to it
+    client_paths: dict[str, str] = field(default_factory=dict)
+
+    def interpreter_path(self) -> str | None:
+        for candidate in self.interpreter:
+            found = shutil.which(candidate, path=SYSTEM_PATH)
+            if found:
+                return found
+        return None
+
+    @property
+    def available(self) -> bool:
+        return self.interpreter_path() is not None
+
+    def command(self, program_file: str) -> list[str]:
+        path = self.interpreter_path()
+        if path is None:
+            raise LanguageUnavailable(self)
+        return [path, *self.args, program_file]
+
+    def client_env(self) -> dict[str, str]:
+        return {var: str(CLIENTS_DIR / folder) for var, folder in self.client_paths.items()}
+
+
+class LanguageUnavailable(Exception):
+    def __init__(self, language: Language):
+        super().__init__(
+            f"The {language.label} interpreter is not installed on this robot computer"
+            f" ({language.install_hint})."
+        )
+
+
+PYTHON_TEMPLATE = """\
+import robot
+
+bot = robot.Robot()
+print("hello robot, my heading is", bot.sensors()["heading"])
+"""
+
+SHELL_TEMPLATE = """\
+#!/bin/sh
+echo "hello robot, my heading is $(robot sensors heading)"
+"""
+
+LANGUAGES: dict[str, Language] = {
+    lang.name: lang
+    for lang in [
+        Language(
+            name="python",
+            label="Python",
+            extension=".py",
+            interpreter=("python3",),
+            args=("-u",),
+            editor_mode="python",
+            install_hint="apt-get install python3",
+            template=PYTHON_TEMPLATE,
+            env={"PYTHONUNBUFFERED": "1", "PYTHONDONTWRITEBYTECODE": "1"},
+            client_paths={"PYTHONPATH": "python"},
+        ),
+        Language(
+            name="shell",
+            label="Shell",
+            extension=".sh",
+            interpreter=("bash", "sh"),
+            editor_mode="shell",
+            install_hint="apt-get install bash",
+            template=SHELL_TEMPLATE,
+            client_paths={"PATH": "shell"},
+        ),
+    ]
+}
+
+
+def get_language(name: str) -> Language:
+    try:
+        return LANGUAGES[name]
+    except KeyError:
+        known = ", ".join(LANGUAGES)
+        raise ValueError(f"Unknown language {name!r}; known languages: {known}.") from None
+
+
+def language_for_filename(filename: str) -> Language | None:
+    suffix = Path(filename).suffix.lower()
+    return next((lang for lang in LANGUAGES.values() if lang.extension == suffix), None)
+
+
+def language_choices() -> list[tuple[str, str]]:
+    return [(lang.name, lang.label) for lang in LANGUAGES.values()]

@@ -1,0 +1,210 @@
+from pathlib import Path
+
+from django.conf import settings
+from django.db import models, transaction
+from django.utils import timezone
+from django.utils.text import slugify
+
+from programs.languages import get_language, language_choices
+from robots.models import Robot
+
+MAX_SOURCE_BYTES = 512 * 1024
+
+
+class Program(models.Model):
+    owner = models.ForeignKey(
+        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="programs"
+    )
+    name = models.CharField(max_length=100)
+    language = models.CharField(max_length=20, choices=language_choices)
+    source = models.TextField(blank=True)
+    created = models.DateTimeField(default=timezone.now)
+    updated = models.DateTimeField(default=timezone.now)
+
+    class Meta:
+        ordering = ["name"]
+        constraints = [
+            models.UniqueConstraint(fields=["owner", "name"], name="unique_program_name")
+        ]
+
+    def __str__(self) -> str:
+        return self.name
+
+    @property
+    def lang(self):
+        return get_language(self.language)
+
+    @property
+    def filename(self) -> str:
+        return (slugify(self.name) or "program") + self.lang.extension
+
+    def save_source(self, source: str, author) -> "Revision":
+        """Save new text; every save keeps a revision, even an unchanged one is not duplicated."""
+        with transaction.atomic():
+            self.source = source
+            self.updated = timezone.now()
+            self.save()
+            latest = self.revisions.first()
+            if latest is not None and latest.source == source:
+                return latest
+            number = (latest.number + 1) if latest else 1
+            return Revision.objects.create(
+                program=self, number=number, source=source, author=author
+            )
+
+    def copy_as(self, name: str, owner) -> "Program":
+        with transaction.atomic():
+            copy = Program.objects.create(owner=owner, name=name, language=self.language)
+            copy.save_source(self.source, owner)
+        return copy
+
+
+class Revision(models.Model):
+    program = models.ForeignKey(Program, on_delete=models.CASCADE, related_name="revisions")
+    number = models.PositiveIntegerField()
+    source = models.TextField(blank=True)
+    author = models.ForeignKey(settings.AUTH_USER_MODEL, on_delete=models.SET_NULL, null=True)
+    created = models.DateTimeField(default=timezone.now)
+
+    class Meta:
+        ordering = ["-number"]
+        constraints = [
+            models.UniqueConstraint(fields=["program", "number"], name="unique_revision_number")
+        ]
+
+    def __str__(self) -> str:
+        return f"{self.program} r{self.number}"
+
+
+class Run(models.Model):
+    class State(models.TextChoices):
+        STARTING = "starting"
+        RUNNING = "running"
+        FINISHED = "finished"
+        FAILED = "failed"
+        STOPPED = "stopped"
+        LOST = "lost"
+
+    ACTIVE = (State.STARTING, State.RUNNING)
+
+    program = models.ForeignKey(Program, on_delete=models.SET_NULL, null=True, related_name="runs")
+    # What ran, kept even if the program is edited or deleted later.
+    program_name = models.CharField(max_length=100)
+    language = models.CharField(max_length=20)
+    source = models.TextField(blank=True)
+    args = models.JSONField(default=list, blank=True)
+    robot = models.ForeignKey(Robot, on_delete=models.CASCADE, related_name="runs")
+    owner = models.ForeignKey(
+        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="runs"
+    )
+    state = models.CharField(max_length=10, choices=State.choices, default=State.STARTING)
+    exit_code = models.IntegerField(null=True, blank=True)
+    reason = models.CharField(max_length=200, blank=True, help_text="How the run ended")
+    created = models.DateTimeField(default=timezone.now)
+    started = models.DateTimeField(null=True, blank=True)
+    ended = models.DateTimeField(null=True, blank=True)
+    pid = models.IntegerField(null=True, blank=True, editable=False)
+
+    class Meta:
+        ordering = ["-created"]
+        indexes = [models.Index(fields=["state"]), models.Index(fields=["robot", "state"])]
+
+    def __str__(self) -> str:
+        return f"run {self.pk} of {self.program_name} on {self.robot_id}"
+
+    @property
+    def active(self) -> bool:
+        return self.state in self.ACTIVE
+
+    @property
+    def directory(self) -> Path:
+        return settings.RUNS_DIR / str(self.pk)
+
+    @property
+    def log_path(self) -> Path:
+        return self.directory / "output.log"
+
+    @property
+    def duration(self):
+        if self.started is None:
+            return None
+        return (self.ended or timezone.now()) - self.started
+
+    @property
+    def log_filename(self) -> str:
+        return f"{slugify(self.program_name) or 'program'}-run{self.pk}.log"
+
+    @classmethod
+    def create_for(cls, program: Program, robot: Robot, user, args=()) -> "Run":
+        return cls.objects.create(
+            program=program,
+            program_name=program.name,
+            language=program.language,
+            source=program.source,
+            args=list(args),
+            robot=robot,
+            owner=user,
+        )
+
+    # -- state changes made by the robot agent ------------------------------------------------
+
+    @classmethod
+    def mark_running(cls, run_id: int, pid: int) -> None:
+        cls.objects.filter(pk=run_id, state=cls.State.STARTING).update(
+            state=cls.State.RUNNING, pid=pid, started=timezone.now()
+        )
+
+    @classmethod
+    def mark_ended(cls, run_id: int, state: str, exit_code: int | None, reason: str) -> None:
+        now = timezone.now()
+        cls.objects.filter(pk=run_id).update(
+            state=state, exit_code=exit_code, reason=reason[:200], ended=now
+        )
+        cls.objects.filter(pk=run_id, started__isnull=True).update(started=now)
+
+    @classmethod
+    def mark_lost(cls, robot_name: str) -> list[int]:
+        """Runs a dead agent left unfinished: nothing is supervising them any more."""
+        lost = list(
+            cls.objects.filter(robot__name=robot_name, state__in=cls.ACTIVE).values_list(
+                "pk", flat=True
+            )
+        )
+        cls.objects.filter(pk__in=lost).update(
+            state=cls.State.LOST,
+            reason="its robot agent stopped while it ran",
+            ended=timezone.now(),
+        )
+        return lost
+
+
+def start_run(program: Program, robot: Robot, user, args=()) -> Run:
+    """Create the run and hand it to the robot's agent (which owns the process)."""
+    from robots.bus import tell_agent_sync  # the bus imports channels; keep models light
+
+    language = program.lang
+    if not language.available:
+        raise RunRefused(
+            f"{language.label} is not available on this robot computer ({language.install_hint})."
+        )
+    run = Run.create_for(program, robot, user, args)
+    message = {
+        "run_id": run.pk,
+        "language": run.language,
+        "source": run.source,
+        "filename": program.filename,
+        "args": [str(a) for a in args],
+    }
+    transaction.on_commit(lambda: tell_agent_sync(robot.name, "run.start", **message))
+    return run
+
+
+def request_stop(run: Run) -> None:
+    from robots.bus import tell_agent_sync
+
+    if run.active:
+        tell_agent_sync(run.robot.name, "run.stop", run_id=run.pk)
+
+
+class RunRefused(Exception):
+    pass

@@ -1,0 +1,264 @@
+"""Runs one program as an OS process and captures its output (no Django here).
+
+Output is written line by line to the run's log file, each line tagged with where it came
+from (``o`` stdout, ``e`` stderr, ``s`` robotide itself), and handed in batches to a callback
+for the live stream. The log file is the truth: the live batches are a bounded view of it and
+may skip lines when a program floods (the batch says how many), the file never does until the
+log size cap, which ends the program with a message saying so.
+"""
+
+import asyncio
+import os
+import signal
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from subprocess import DEVNULL, PIPE
+
+STDOUT, STDERR, SYSTEM = b"o", b"e", b"s"
+TAG_OF_FD = {1: STDOUT, 2: STDERR}
+MAX_LINE = 64 * 1024  # a longer line without a newline is cut into pieces of this size
+# A live batch carries at most this much; the rest is counted as skipped (the log has it all).
+LIVE_MAX_BYTES = 128 * 1024
+LIVE_MAX_LINES = 1000
+
+# (offset of the line in the log file, tag "o"|"e"|"s", text)
+LiveLine = tuple[int, str, str]
+OutputCallback = Callable[[list[LiveLine], int], None]
+
+SIGNAL_REASONS = {
+    signal.SIGXCPU: "CPU time limit reached",
+    signal.SIGXFSZ: "file size limit reached",
+}
+
+
+@dataclass(frozen=True)
+class Outcome:
+    state: str  # finished | failed | stopped
+    exit_code: int | None  # negative: killed by that signal
+    reason: str
+
+
+def parse_log_line(line: bytes) -> tuple[str, bytes]:
+    return line[:1].decode(), line[2:]
+
+
+def format_reason(returncode: int) -> str:
+    if returncode >= 0:
+        return f"exit status {returncode}"
+    sig = signal.Signals(-returncode)
+    return SIGNAL_REASONS.get(sig, f"killed by {sig.name}")
+
+
+class RunProcess:
+    """One running program: start(), stop(), wait()."""
+
+    def __init__(
+        self,
+        argv: list[str],
+        *,
+        env: dict[str, str],
+        cwd: Path,
+        log_path: Path,
+        on_output: OutputCallback,
+        max_log_bytes: int = 64 * 1024 * 1024,
+        grace: float = 3.0,
+        batch_interval: float = 0.1,
+    ):
+        self.argv, self.env, self.cwd, self.log_path = argv, env, cwd, log_path
+        self.on_output = on_output
+        self.max_log_bytes = max_log_bytes
+        self.grace = grace
+        self.batch_interval = batch_interval
+        self.pid: int | None = None
+        self.returncode: int | None = None
+        self.lines_written = 0
+        self._partial = {1: b"", 2: b""}
+        self._written = 0
+        self._capped = False
+        self._pending: list[tuple[int, bytes]] = []
+        self._pending_bytes = 0
+        self._skipped = 0
+        self._flush_handle: asyncio.Handle | None = None
+        self._last_flush = 0.0
+        self._kill_handle: asyncio.TimerHandle | None = None
+        self._stop_reason: str | None = None
+        self._stop_state = "stopped"
+        self._done: asyncio.Future | None = None
+
+    async def start(self) -> int:
+        loop = asyncio.get_running_loop()
+        self._done = loop.create_future()
+        self.log_path.parent.mkdir(parents=True, exist_ok=True)
+        # Buffered writes to a local file; flushed with every live batch so readers see whole lines.
+        self._log = open(self.log_path, "ab", buffering=1 << 20)  # noqa: SIM115
+        self._written = self._log.tell()
+        try:
+            self._transport, _ = await loop.subprocess_exec(
+                lambda: _Protocol(self),
+                *self.argv,
+                stdin=DEVNULL,
+                stdout=PIPE,
+                stderr=PIPE,
+                cwd=self.cwd,
+                env=self.env,
+                start_new_session=True,
+            )
+        except OSError:
+            self._log.close()
+            raise
+        self.pid = self._transport.get_pid()
+        return self.pid
+
+    @property
+    def running(self) -> bool:
+        return self._done is not None and not self._done.done()
+
+    def stop(self, reason: str = "stopped by user", state: str = "stopped") -> None:
+        """SIGTERM to the whole process group now, SIGKILL after the grace period."""
+        if not self.running or self._stop_reason is not None:
+            return
+        self._stop_reason, self._stop_state = reason, state
+        self.system_line(f"{reason}: sending SIGTERM")
+        self._signal_group(signal.SIGTERM)
+        self._kill_handle = asyncio.get_running_loop().call_later(self.grace, self._kill_late)
+
+    async def wait(self) -> Outcome:
+        await asyncio.shield(self._done)
+        return self.outcome()
+
+    def outcome(self) -> Outcome:
+        rc = self.returncode
+        if self._stop_reason is not None:
+            return Outcome(self._stop_state, rc, self._stop_reason)
+        state = "finished" if rc == 0 else "failed"
+        return Outcome(state, rc, format_reason(rc))
+
+    def system_line(self, text: str) -> None:
+        self._append(SYSTEM, [f"[robotide] {text}".encode()], force=True)
+        self._schedule_flush()
+
+    # -- output ---------------------------------------------------------------------------
+
+    def _feed(self, fd: int, data: bytes) -> None:
+        lines = (self._partial[fd] + data).split(b"\n")
+        rest = lines.pop()
+        while len(rest) > MAX_LINE:
+            lines.append(rest[:MAX_LINE])
+            rest = rest[MAX_LINE:]
+        self._partial[fd] = rest
+        if lines:
+            self._append(TAG_OF_FD[fd], lines)
+            self._schedule_flush()
+
+    def _end_of_stream(self, fd: int) -> None:
+        if self._partial.get(fd):
+            self._append(TAG_OF_FD[fd], [self._partial[fd]])
+            self._partial[fd] = b""
+
+    def _append(self, tag: bytes, lines: list[bytes], force: bool = False) -> None:
+        if self._capped and not force:
+            return
+        prefix = tag + b" "
+        chunk = prefix + (b"\n" + prefix).join(lines) + b"\n"
+        if not force and self._written + len(chunk) > self.max_log_bytes:
+            self._hit_log_cap()
+            return
+        start = self._written
+        self._log.write(chunk)
+        self._written += len(chunk)
+        self.lines_written += len(lines)
+        self._pending.append((start, chunk))
+        self._pending_bytes += len(chunk)
+        while self._pending_bytes > LIVE_MAX_BYTES and len(self._pending) > 1:
+            _, dropped = self._pending.pop(0)
+            self._pending_bytes -= len(dropped)
+            self._skipped += dropped.count(b"\n")
+
+    def _hit_log_cap(self) -> None:
+        self._capped = True
+        limit_mb = self.max_log_bytes / (1024 * 1024)
+        reason = f"output size limit ({limit_mb:g} MB) reached; further output was discarded"
+        self.system_line(reason)
+        self.stop(reason, state="failed")
+
+    def _schedule_flush(self) -> None:
+        # The first line goes out at once; under a flood, at most one batch per interval.
+        if self._flush_handle is not None:
+            return
+        loop = asyncio.get_running_loop()
+        delay = max(0.0, self._last_flush + self.batch_interval - time.monotonic())
+        self._flush_handle = loop.call_later(delay, self._flush)
+
+    def _flush(self) -> None:
+        self._flush_handle = None
+        self._last_flush = time.monotonic()
+        if self._log.closed:
+            return
+        self._log.flush()
+        pending, skipped = self._pending, self._skipped
+        self._pending, self._pending_bytes, self._skipped = [], 0, 0
+        lines = list(_live_lines(pending))
+        if len(lines) > LIVE_MAX_LINES:
+            skipped += len(lines) - LIVE_MAX_LINES
+            lines = lines[-LIVE_MAX_LINES:]
+        if lines or skipped:
+            self.on_output(lines, skipped)
+
+    # -- process --------------------------------------------------------------------------
+
+    def _signal_group(self, sig: int) -> None:
+        try:
+            os.killpg(self.pid, sig)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+    def _kill_late(self) -> None:
+        if self.running:
+            self.system_line(f"did not stop within {self.grace:g} s: sending SIGKILL")
+            self._signal_group(signal.SIGKILL)
+
+    def _exited(self) -> None:
+        self.returncode = self._transport.get_returncode()
+        # Whatever the program left behind in its group ends with it, so its pipes close too.
+        self._signal_group(signal.SIGKILL)
+
+    def _finished(self) -> None:
+        if self._kill_handle is not None:
+            self._kill_handle.cancel()
+        for fd in (1, 2):
+            self._end_of_stream(fd)
+        outcome = self.outcome()
+        self._append(SYSTEM, [f"[robotide] {outcome.state}: {outcome.reason}".encode()], force=True)
+        if self._flush_handle is not None:
+            self._flush_handle.cancel()
+        self._flush()
+        self._log.close()
+        self._transport.close()
+        self._done.set_result(None)
+
+
+def _live_lines(pending: list[tuple[int, bytes]]):
+    for start, chunk in pending:
+        offset = start
+        for line in chunk.split(b"\n")[:-1]:
+            yield offset, chr(line[0]), line[2:].decode("utf-8", "replace")
+            offset += len(line) + 1
+
+
+class _Protocol(asyncio.SubprocessProtocol):
+    def __init__(self, run: RunProcess):
+        self.run = run
+
+    def pipe_data_received(self, fd: int, data: bytes) -> None:
+        self.run._feed(fd, data)
+
+    def pipe_connection_lost(self, fd: int, exc) -> None:
+        self.run._end_of_stream(fd)
+
+    def process_exited(self) -> None:
+        self.run._exited()
+
+    def connection_lost(self, exc) -> None:
+        self.run._finished()

@@ -1,0 +1,34 @@
+// The code editor: CodeMirror over the plain textarea (which is what a browser without
+// scripts gets, and what the form submits either way).
+(function () {
+  "use strict";
+  document.addEventListener("DOMContentLoaded", function () {
+    var textarea = document.getElementById("source");
+    if (!textarea || typeof CodeMirror === "undefined") return;
+    var form = textarea.form;
+    function press(action) {
+      var button = form.querySelector('button[name="action"][value="' + action + '"]');
+      if (button && !button.disabled) button.click();
+    }
+    var editor = CodeMirror.fromTextArea(textarea, {
+      mode: textarea.dataset.editorMode || null,
+      lineNumbers: true,
+      indentUnit: 4,
+      matchBrackets: true,
+      viewportMargin: 50,
+      extraKeys: {
+        "Ctrl-S": function () { press("save"); },
+        "Cmd-S": function () { press("save"); },
+        "Ctrl-Enter": function () { press("run"); },
+        Tab: function (cm) { cm.execCommand(cm.somethingSelected() ? "indentMore" : "insertSoftTab"); },
+      },
+    });
+    editor.setSize(null, "60vh");
+    var language = form.querySelector('select[name="language"]');
+    var modes = { python: "python", shell: "shell" };
+    if (language) language.addEventListener("change", function () {
+      editor.setOption("mode", modes[language.value] || null);
+    });
+    window.robotideEditor = editor;
+  });
+})();

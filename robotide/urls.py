@@ -1,0 +1,48 @@
+from django.contrib import admin
+from django.contrib.auth import views as auth_views
+from django.urls import path
+from django.views.generic import RedirectView
+
+from programs import views as programs
+from robotide.api import api
+from robots import views as robots
+
+urlpatterns = [
+    path("", RedirectView.as_view(pattern_name="program-list"), name="home"),
+    path("programs/", programs.program_list, name="program-list"),
+    path("programs/new", programs.program_create, name="program-create"),
+    path("programs/upload", programs.program_upload, name="program-upload"),
+    path("programs/<int:program_id>/", programs.program_edit, name="program-edit"),
+    path("programs/<int:program_id>/run", programs.program_run, name="program-run"),
+    path("programs/<int:program_id>/download", programs.program_download, name="program-download"),
+    path("programs/<int:program_id>/delete", programs.program_delete, name="program-delete"),
+    path("programs/<int:program_id>/revisions/", programs.revision_list, name="revision-list"),
+    path(
+        "programs/<int:program_id>/revisions/<int:number>/",
+        programs.revision_detail,
+        name="revision-detail",
+    ),
+    path("runs/", programs.run_list, name="run-list"),
+    path("runs/<int:run_id>/", programs.run_detail, name="run-detail"),
+    path("runs/<int:run_id>/log", programs.run_log, name="run-log"),
+    path("runs/<int:run_id>/stop", programs.run_stop, name="run-stop"),
+    path("robots/", robots.robot_list, name="robot-list"),
+    path("robots/<slug:name>/", robots.robot_detail, name="robot-detail"),
+    path("robots/<slug:name>/estop", robots.robot_estop, name="robot-estop"),
+    path("robots/<slug:name>/run", robots.robot_run, name="robot-run"),
+    path("robots/<slug:name>/camera.jpg", robots.robot_camera, name="robot-camera"),
+    path("accounts/login/", auth_views.LoginView.as_view(), name="login"),
+    path("accounts/logout/", auth_views.LogoutView.as_view(), name="logout"),
+    path(
+        "accounts/password/",
+        auth_views.PasswordChangeView.as_view(success_url="/accounts/password/done/"),
+        name="password_change",
+    ),
+    path(
+        "accounts/password/done/",
+        auth_views.PasswordChangeDoneView.as_view(),
+        name="password_change_done",
+    ),
+    path("api/", api.urls),
+    path("admin/", admin.site.urls),
+]

@@ -1,0 +1,310 @@
+"""The robot agent: the only process that owns a robot's hardware and its programs.
+
+It takes commands from the channel layer (run.start, run.stop, robot.estop, robot.sensors,
+robot.camera), serves the Robot API socket to the programs it launched, and publishes their
+output, the run states and the robot's telemetry to groups. Embedded mode runs one agent per
+robot inside the web server process (AgentManager); fleet mode runs `robotide agent NAME`.
+"""
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import secrets
+from dataclasses import dataclass, field
+from functools import partial
+
+from channels.db import database_sync_to_async
+from channels.layers import get_channel_layer
+from django.conf import settings
+from django.utils import timezone
+
+import rhal
+from programs import launcher
+from programs.languages import LanguageUnavailable, get_language
+from programs.models import Run
+from programs.supervisor import RunProcess
+from robots import rpc
+from robots.bus import MANAGER_CHANNEL, RUNS_GROUP, run_group
+from robots.models import Robot, agent_channel, robot_group
+from robots.robot_api import RobotApi
+
+log = logging.getLogger(__name__)
+
+TELEMETRY_INTERVAL = 0.25
+HEARTBEAT_INTERVAL = 5.0
+SHOWS_SNAPSHOT_EVERY = 4  # telemetry ticks
+
+
+@dataclass
+class ActiveRun:
+    run_id: int
+    token: str
+    process: RunProcess
+    drove: bool = False
+    watcher: asyncio.Task | None = field(default=None, repr=False)
+
+
+class RobotAgent:
+    def __init__(self, name: str):
+        self.name = name
+        self.channel = agent_channel(name)
+        self.group = robot_group(name)
+        self.runs: dict[int, ActiveRun] = {}
+        self.tokens: dict[str, ActiveRun] = {}
+        self.shows: dict[str, dict] = {}
+        self.layer = get_channel_layer()
+        self.driver: rhal.Robot | None = None
+        self.api = RobotApi(self)
+        self.server = rpc.RobotApiServer(self.api.handle)
+        self.ready = asyncio.Event()
+        self._outbox: asyncio.Queue = asyncio.Queue()
+        self._tasks: list[asyncio.Task] = []
+
+    # -- life cycle -----------------------------------------------------------------------
+
+    async def serve(self) -> None:
+        """Run until cancelled; always shuts down its programs and robot on the way out."""
+        try:
+            await self.start()
+            await asyncio.gather(*self._tasks)
+        finally:
+            await self.shutdown()
+
+    async def start(self) -> None:
+        robot = await database_sync_to_async(Robot.objects.get)(name=self.name)
+        self.limits = robot.run_limits(settings.RUN_DEFAULTS)
+        self.driver = rhal.connect(robot.url, **robot.driver_options())
+        await self.driver.open()
+        lost = await database_sync_to_async(Run.mark_lost)(self.name)
+        for run_id in lost:
+            self.publish(run_group(run_id), {"type": "run.state", "run_id": run_id})
+        self.api_address = await self.server.start()
+        self._tasks = [
+            asyncio.create_task(self._receive_loop(), name=f"{self.name}-receive"),
+            asyncio.create_task(self._publish_loop(), name=f"{self.name}-publish"),
+            asyncio.create_task(self._telemetry_loop(), name=f"{self.name}-telemetry"),
+        ]
+        self.ready.set()
+        log.info("agent %s: %s, Robot API on %s", self.name, robot.url, self.api_address)
+
+    async def shutdown(self) -> None:
+        for active in list(self.runs.values()):
+            active.process.stop("robot agent shutting down")
+        watchers = [a.watcher for a in self.runs.values() if a.watcher]
+        if watchers:
+            await asyncio.wait(watchers, timeout=settings.RUN_DEFAULTS["stop_grace_seconds"] + 2)
+        await self.server.close()
+        if self.driver is not None:
+            with contextlib.suppress(Exception):
+                await self.driver.stop()
+            await self.driver.close()
+        for task in self._tasks:
+            task.cancel()
+        # Deliver what is queued (the final run states) before going away.
+        while not self._outbox.empty():
+            group, message = self._outbox.get_nowait()
+            with contextlib.suppress(Exception):
+                await self.layer.group_send(group, message)
+
+    # -- commands from the web tier ---------------------------------------------------------
+
+    async def _receive_loop(self) -> None:
+        while True:
+            message = await self.layer.receive(self.channel)
+            try:
+                await self.dispatch(message)
+            except Exception:
+                log.exception("agent %s: %s failed", self.name, message.get("type"))
+                await self.reply(message, {"error": f"agent failed on {message.get('type')}"})
+
+    async def dispatch(self, message: dict) -> None:
+        kind = message.get("type")
+        if kind == "run.start":
+            await self.start_run(message)
+        elif kind == "run.stop":
+            self.stop_run(message["run_id"], "stopped by user")
+        elif kind == "robot.estop":
+            stopped = await self.estop()
+            await self.reply(message, {"stopped": stopped})
+        elif kind == "robot.sensors":
+            await self.reply(message, {"sensors": await self.driver.sensors()})
+        elif kind == "robot.camera":
+            await self.reply(message, {"jpeg": await self.driver.camera_jpeg()})
+        else:
+            log.warning("agent %s: unknown message %r", self.name, kind)
+
+    async def reply(self, message: dict, data: dict) -> None:
+        if message.get("reply_to"):
+            await self.layer.send(message["reply_to"], {"type": "agent.reply", **data})
+
+    # -- runs -------------------------------------------------------------------------------
+
+    async def start_run(self, message: dict) -> None:
+        run_id = message["run_id"]
+        try:
+            active = await self._launch(run_id, message)
+        except (LanguageUnavailable, launcher.LauncherUnavailable, ValueError, OSError) as exc:
+            await self._end_run(run_id, "failed", None, f"could not start: {exc}")
+            return
+        await database_sync_to_async(Run.mark_running)(run_id, active.process.pid)
+        self._run_changed(run_id)
+
+    async def _launch(self, run_id: int, message: dict) -> ActiveRun:
+        language = get_language(message["language"])
+        directory = settings.RUNS_DIR / str(run_id)
+        workdir = directory / "work"
+        workdir.mkdir(parents=True, exist_ok=True)
+        program_file = workdir / message["filename"]
+        program_file.write_text(message["source"])
+        limits = launcher.Limits.from_settings(self.limits)
+        token = secrets.token_urlsafe(24)
+        env = launcher.environment(
+            language,
+            workdir,
+            {
+                "ROBOT_API": self.api_address,
+                "ROBOT_TOKEN": token,
+                "ROBOT_NAME": self.name,
+                "ROBOT_RUN_ID": str(run_id),
+            },
+        )
+        process = RunProcess(
+            launcher.command(language, program_file, limits, message.get("args", ())),
+            env=env,
+            cwd=workdir,
+            log_path=directory / "output.log",
+            on_output=partial(self._publish_output, run_id),
+            max_log_bytes=int(self.limits["log_size_mb"]) * 1024 * 1024,
+            grace=float(self.limits["stop_grace_seconds"]),
+        )
+        await process.start()
+        active = ActiveRun(run_id, token, process)
+        self.runs[run_id] = active
+        self.tokens[token] = active
+        active.watcher = asyncio.create_task(self._watch(active))
+        return active
+
+    async def _watch(self, active: ActiveRun) -> None:
+        outcome = await active.process.wait()
+        # The token dies with the run, before anything else can use it.
+        self.tokens.pop(active.token, None)
+        self.runs.pop(active.run_id, None)
+        if active.drove and not any(a.drove for a in self.runs.values()):
+            with contextlib.suppress(rhal.RhalError):
+                await self.driver.stop()
+        await self._end_run(active.run_id, outcome.state, outcome.exit_code, outcome.reason)
+
+    async def _end_run(self, run_id, state, exit_code, reason) -> None:
+        await database_sync_to_async(Run.mark_ended)(run_id, state, exit_code, reason)
+        self._run_changed(run_id)
+
+    def stop_run(self, run_id: int, reason: str) -> bool:
+        active = self.runs.get(run_id)
+        if active is None:
+            return False
+        active.process.stop(reason)
+        return True
+
+    async def estop(self) -> int:
+        stopped = sum(self.stop_run(run_id, "emergency stop") for run_id in list(self.runs))
+        await self.driver.stop()
+        return stopped
+
+    # -- publishing -------------------------------------------------------------------------
+
+    def publish(self, group: str, message: dict) -> None:
+        """Queue a group event; one task sends them in order (a layer may reorder tasks)."""
+        self._outbox.put_nowait((group, message))
+
+    def _publish_output(self, run_id: int, lines: list, skipped: int) -> None:
+        self.publish(
+            run_group(run_id),
+            {"type": "run.output", "run_id": run_id, "lines": lines, "skipped": skipped},
+        )
+
+    def _run_changed(self, run_id: int) -> None:
+        self.publish(run_group(run_id), {"type": "run.state", "run_id": run_id})
+        self.publish(RUNS_GROUP, {"type": "runs.changed", "run_id": run_id, "robot": self.name})
+        self.publish(self.group, {"type": "robot.runs", "robot": self.name})
+
+    async def _publish_loop(self) -> None:
+        while True:
+            group, message = await self._outbox.get()
+            try:
+                await self.layer.group_send(group, message)
+            except Exception:
+                log.exception("agent %s: could not publish to %s", self.name, group)
+
+    async def _telemetry_loop(self) -> None:
+        """Latest-state snapshots, throttled at the source; all shown values once a second."""
+        last_heartbeat = 0.0
+        loop = asyncio.get_running_loop()
+        specs = self.driver.capabilities().get("sensors", {})
+        units = {name: spec.get("unit", "") for name, spec in specs.items()}
+        for tick in itertools.count():
+            try:
+                sensors = await self.driver.sensors()
+            except rhal.RhalError as exc:
+                sensors = {"error": str(exc)}
+            changed, self.api.changed_shows = self.api.changed_shows, {}
+            shows = dict(self.shows) if tick % SHOWS_SNAPSHOT_EVERY == 0 else changed
+            self.publish(
+                self.group,
+                {
+                    "type": "robot.telemetry",
+                    "robot": self.name,
+                    "sensors": sensors,
+                    "units": units,
+                    "shows": shows,
+                },
+            )
+            if loop.time() - last_heartbeat >= HEARTBEAT_INTERVAL:
+                last_heartbeat = loop.time()
+                await database_sync_to_async(Robot.objects.filter(name=self.name).update)(
+                    last_seen=timezone.now()
+                )
+            await asyncio.sleep(TELEMETRY_INTERVAL)
+
+
+class AgentManager:
+    """Embedded mode: one agent per robot, inside the web server process."""
+
+    def __init__(self):
+        self.agents: dict[str, tuple[RobotAgent, asyncio.Task]] = {}
+        self._listener: asyncio.Task | None = None
+
+    async def start(self) -> None:
+        names = await database_sync_to_async(
+            lambda: list(Robot.objects.values_list("name", flat=True))
+        )()
+        for name in names:
+            self.start_agent(name)
+        self._listener = asyncio.create_task(self._listen())
+
+    def start_agent(self, name: str) -> RobotAgent:
+        if name in self.agents and not self.agents[name][1].done():
+            return self.agents[name][0]
+        agent = RobotAgent(name)
+        task = asyncio.create_task(agent.serve(), name=f"agent-{name}")
+        task.add_done_callback(partial(self._agent_ended, name))
+        self.agents[name] = (agent, task)
+        return agent
+
+    def _agent_ended(self, name: str, task: asyncio.Task) -> None:
+        if not task.cancelled() and task.exception() is not None:
+            log.error("agent %s stopped: %r", name, task.exception())
+
+    async def _listen(self) -> None:
+        layer = get_channel_layer()
+        while True:
+            message = await layer.receive(MANAGER_CHANNEL)
+            if message.get("type") == "robot.added":
+                self.start_agent(message["name"])
+
+    async def shutdown(self) -> None:
+        if self._listener:
+            self._listener.cancel()
+        for _, task in self.agents.values():
+            task.cancel()
+        await asyncio.gather(*(t for _, t in self.agents.values()), return_exceptions=True)

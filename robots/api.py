@@ -1,0 +1,75 @@
+from urllib.parse import urlsplit
+
+from django.db import IntegrityError
+from ninja import Field, Router, Schema
+from ninja.errors import HttpError
+from pydantic import field_validator
+
+import rhal
+from robots.bus import announce_robot_sync, ask_agent_sync
+from robots.models import Robot, get_robot_for_user
+
+robots_router = Router(tags=["robots"])
+
+
+class RobotIn(Schema):
+    name: str = Field(pattern=r"^[a-zA-Z0-9_-]{1,50}$")
+    url: str = Field(min_length=1, max_length=500)
+    settings: dict = {}
+    description: str = ""
+
+    @field_validator("url")
+    @classmethod
+    def known_driver(cls, value):
+        scheme = urlsplit(value).scheme.lower()
+        if scheme not in rhal.DRIVERS:
+            known = ", ".join(f"{name}://" for name in sorted(rhal.DRIVERS))
+            raise ValueError(f"no robot driver for {value!r}; known: {known}")
+        return value
+
+
+class RobotOut(Schema):
+    name: str
+    url: str
+    settings: dict
+    description: str
+    last_seen: str | None = None
+
+    @staticmethod
+    def resolve_last_seen(robot):
+        return robot.last_seen.isoformat() if robot.last_seen else None
+
+
+@robots_router.get("", response=list[RobotOut])
+def list_robots(request):
+    return Robot.objects.all()
+
+
+@robots_router.post("", response={201: RobotOut, 409: dict})
+def create_robot(request, data: RobotIn):
+    if not request.user.is_staff:
+        raise HttpError(403, "Only staff may add robots.")
+    try:
+        robot = Robot.objects.create(**data.dict())
+    except IntegrityError:
+        return 409, {"detail": f"A robot named {data.name!r} exists already."}
+    announce_robot_sync(robot.name)
+    return 201, robot
+
+
+@robots_router.get("/{name}", response=RobotOut)
+def get_robot(request, name: str):
+    return get_robot_for_user(request.user, name)
+
+
+@robots_router.get("/{name}/sensors", response=dict)
+def robot_sensors(request, name: str):
+    robot = get_robot_for_user(request.user, name)
+    return ask_agent_sync(robot.name, "robot.sensors")["sensors"]
+
+
+@robots_router.post("/{name}/estop", response=dict)
+def robot_estop(request, name: str):
+    robot = get_robot_for_user(request.user, name)
+    reply = ask_agent_sync(robot.name, "robot.estop")
+    return {"robot": robot.name, "stopped_runs": reply["stopped"]}

@@ -1,0 +1,69 @@
+from django.contrib import messages
+from django.contrib.auth.decorators import login_required
+from django.http import HttpRequest, HttpResponse
+from django.shortcuts import redirect, render
+from django.views.decorators.http import require_POST
+
+from programs.access import get_program_for_user, programs_for_user, runs_for_user
+from programs.models import Run, RunRefused, start_run
+from robots.bus import AgentUnavailable, ask_agent_sync
+from robots.models import Robot, get_robot_for_user
+
+
+@login_required
+def robot_list(request: HttpRequest) -> HttpResponse:
+    return render(request, "robots/list.html", {"robots": Robot.objects.all()})
+
+
+@login_required
+def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
+    robot = get_robot_for_user(request.user, name)
+    return render(
+        request,
+        "robots/detail.html",
+        {
+            "robot": robot,
+            "running": runs_for_user(request.user).filter(robot=robot, state__in=Run.ACTIVE),
+            "programs": programs_for_user(request.user),
+        },
+    )
+
+
+@login_required
+@require_POST
+def robot_estop(request: HttpRequest, name: str) -> HttpResponse:
+    robot = get_robot_for_user(request.user, name)
+    try:
+        stopped = ask_agent_sync(robot.name, "robot.estop")["stopped"]
+    except AgentUnavailable as exc:
+        messages.error(request, str(exc))
+    else:
+        messages.warning(
+            request, f"Emergency stop: {robot.name} stopped, {stopped} program(s) ended."
+        )
+    return redirect("robot-detail", robot.name)
+
+
+@login_required
+@require_POST
+def robot_run(request: HttpRequest, name: str) -> HttpResponse:
+    robot = get_robot_for_user(request.user, name)
+    program = get_program_for_user(request.user, request.POST.get("program"))
+    try:
+        run = start_run(program, robot, request.user)
+    except RunRefused as exc:
+        messages.error(request, str(exc))
+        return redirect("robot-detail", robot.name)
+    return redirect("run-detail", run.pk)
+
+
+@login_required
+def robot_camera(request: HttpRequest, name: str) -> HttpResponse:
+    robot = get_robot_for_user(request.user, name)
+    try:
+        jpeg = ask_agent_sync(robot.name, "robot.camera")["jpeg"]
+    except AgentUnavailable as exc:
+        return HttpResponse(str(exc), status=503, content_type="text/plain")
+    response = HttpResponse(jpeg, content_type="image/jpeg")
+    response["Cache-Control"] = "no-store"
+    return response
