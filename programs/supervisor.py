@@ -142,12 +142,13 @@ class RunProcess:
     # -- output ---------------------------------------------------------------------------
 
     def _feed(self, fd: int, data: bytes) -> None:
-        lines = (self._partial[fd] + data).split(b"\n")
-        rest = lines.pop()
-        while len(rest) > MAX_LINE:
-            lines.append(rest[:MAX_LINE])
-            rest = rest[MAX_LINE:]
-        self._partial[fd] = rest
+        buffer = self._partial[fd] + data
+        lines = buffer.split(b"\n")
+        if len(buffer) > MAX_LINE:  # only then can a line be too long: worth a look
+            lines = [piece for line in lines for piece in _cut(line)] if lines[:-1] else lines
+            while len(lines[-1]) > MAX_LINE:
+                lines[-1:] = [lines[-1][:MAX_LINE], lines[-1][MAX_LINE:]]
+        self._partial[fd] = lines.pop()
         if lines:
             self._append(TAG_OF_FD[fd], lines)
             self._schedule_flush()
@@ -237,6 +238,10 @@ class RunProcess:
         self._log.close()
         self._transport.close()
         self._done.set_result(None)
+
+
+def _cut(line: bytes) -> list[bytes]:
+    return [line[i : i + MAX_LINE] for i in range(0, len(line), MAX_LINE)] or [line]
 
 
 def _live_lines(pending: list[tuple[int, bytes]]):

@@ -34,6 +34,7 @@ log = logging.getLogger(__name__)
 TELEMETRY_INTERVAL = 0.25
 HEARTBEAT_INTERVAL = 5.0
 SHOWS_SNAPSHOT_EVERY = 4  # telemetry ticks
+RETRY_DELAY = 1.0
 
 
 @dataclass
@@ -111,7 +112,12 @@ class RobotAgent:
 
     async def _receive_loop(self) -> None:
         while True:
-            message = await self.layer.receive(self.channel)
+            try:
+                message = await self.layer.receive(self.channel)
+            except Exception:  # e.g. Redis restarting: keep serving the programs, retry
+                log.exception("agent %s: channel layer receive failed; retrying", self.name)
+                await asyncio.sleep(RETRY_DELAY)
+                continue
             try:
                 await self.dispatch(message)
             except Exception:
@@ -261,9 +267,12 @@ class RobotAgent:
             )
             if loop.time() - last_heartbeat >= HEARTBEAT_INTERVAL:
                 last_heartbeat = loop.time()
-                await database_sync_to_async(Robot.objects.filter(name=self.name).update)(
-                    last_seen=timezone.now()
-                )
+                try:
+                    await database_sync_to_async(Robot.objects.filter(name=self.name).update)(
+                        last_seen=timezone.now()
+                    )
+                except Exception:  # the database away for a moment must not stop the robot
+                    log.exception("agent %s: heartbeat failed", self.name)
             await asyncio.sleep(TELEMETRY_INTERVAL)
 
 
@@ -298,7 +307,12 @@ class AgentManager:
     async def _listen(self) -> None:
         layer = get_channel_layer()
         while True:
-            message = await layer.receive(MANAGER_CHANNEL)
+            try:
+                message = await layer.receive(MANAGER_CHANNEL)
+            except Exception:
+                log.exception("agent manager: channel layer receive failed; retrying")
+                await asyncio.sleep(RETRY_DELAY)
+                continue
             if message.get("type") == "robot.added":
                 self.start_agent(message["name"])
 

@@ -1,0 +1,9 @@
+"""robotide's benchmarks: they print figures, they never decide a test's verdict.
+
+Run them all with ``make bench`` or ``.venv/bin/python -m benchmarks``; one with
+``.venv/bin/python -m benchmarks.start_overhead`` (or throughput, api_roundtrips, idle_memory).
+Each benchmark starts its own real appliance (``robotide up`` in a subprocess, see
+tests/appliance.py) on 127.0.0.1 and measures its baselines in the same run.
+"""
+
+BENCHMARKS = ("idle_memory", "start_overhead", "api_roundtrips", "throughput")

@@ -1,0 +1,170 @@
+"""Robot API round trips: how many bot.sensors() calls a program gets through per second.
+
+One Python program, run through the appliance like any user program, times 20,000
+`bot.sensors()` calls with the real client library (programs/clients/python/robot.py) and
+prints the rate and the per-call latency; the figures are read from the run's log.
+
+Baselines, same run, same program file and client, launched from here with the launcher's
+environment against a Robot API server in a process of its own:
+- "rpc only": robots.rpc.RobotApiServer answering every call with a fixed sensors dict
+  (the JSON-RPC framing, socket and event loop costs alone);
+- "RobotApi + sim": the real robots.robot_api.RobotApi over a real sim:// driver, without the
+  web server and agent around it (adds the method dispatch and the simulation).
+The appliance adds to that sharing its event loop with the web server and the agent.
+
+Target: >= 10,000 sensors() round trips/s through the appliance.
+"""
+
+import asyncio
+import json
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+from benchmarks.common import (
+    MS,
+    Figure,
+    appliance,
+    print_table,
+    say,
+)
+
+BENCH = "3 Robot API"
+CALLS = 20_000
+TARGET = 10_000
+RUN_TIMEOUT = 60.0
+TOKEN = "bench-token"
+PROGRAM = f"""\
+import time
+import robot
+
+bot = robot.Robot()
+for _ in range(500):
+    bot.sensors()
+N = {CALLS}
+times = []
+now = time.perf_counter
+t = start = now()
+for _ in range(N):
+    bot.sensors()
+    t2 = now()
+    times.append(t2 - t)
+    t = t2
+total = now() - start
+times.sort()
+print("RATE %.1f P50 %.6f P99 %.6f" % (N / total, times[N // 2], times[int(N * 0.99)]))
+"""
+RESULT_RE = re.compile(r"RATE ([\d.]+) P50 ([\d.]+) P99 ([\d.]+)")
+
+
+def parse(text: str) -> dict | None:
+    m = RESULT_RE.search(text)
+    if not m:
+        return None
+    return {"rate": float(m.group(1)), "p50": float(m.group(2)), "p99": float(m.group(3))}
+
+
+# -- the baseline servers (run in a process of their own: python -m ... serve MODE) ----------
+
+
+def serve(mode: str, sample: str) -> None:
+    import rhal
+    from robots.robot_api import RobotApi
+    from robots.rpc import RobotApiServer, RpcError
+
+    async def main():
+        if mode == "rpc":
+            fixed = json.loads(sample)
+
+            async def handler(session, method, params):
+                if method == "auth":
+                    if params != [TOKEN]:
+                        raise RpcError(-32001, "invalid token")
+                    session.run = True
+                    return {"robot": "bench", "run": 0}
+                return fixed
+
+        else:
+            driver = rhal.connect("sim://")
+            await driver.open()
+            active = SimpleNamespace(run_id=0, token=TOKEN, drove=False)
+            agent = SimpleNamespace(name="bench", tokens={TOKEN: active}, shows={},
+                                    driver=driver)  # fmt: skip
+            handler = RobotApi(agent).handle
+        server = RobotApiServer(handler)
+        print(await server.start(), flush=True)
+        await asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)  # until EOF
+
+    asyncio.run(main())
+
+
+def baseline(mode: str, sample: str, file: Path, work: Path) -> dict | None:
+    from programs import launcher
+    from programs.languages import get_language
+
+    server = subprocess.Popen(
+        [sys.executable, "-m", "benchmarks.api_roundtrips", "serve", mode, sample],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        address = server.stdout.readline().strip()
+        language = get_language("python")
+        env = launcher.environment(language, work, {"ROBOT_API": address, "ROBOT_TOKEN": TOKEN})
+        done = subprocess.run(language.command(str(file)), env=env, cwd=work, capture_output=True,
+                              text=True, timeout=RUN_TIMEOUT)  # fmt: skip
+        result = parse(done.stdout)
+        if result is None:
+            say(f"[{BENCH}] baseline {mode} printed: {done.stdout!r} {done.stderr!r}")
+        return result
+    finally:
+        server.stdin.close()
+        try:
+            server.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            server.kill()
+
+
+def run() -> list[Figure]:
+    figures: list[Figure] = []
+    work = Path(tempfile.mkdtemp(prefix="robotide-bench-api-"))
+    file = work / "calls.py"
+    file.write_text(PROGRAM)
+    with appliance("api") as app:
+        sample = json.dumps(app.api("GET", "/api/robots/sim/sensors").json())
+        program = app.create_program("bench sensors calls", PROGRAM)
+        say(f"[{BENCH}] {CALLS:,} sensors() calls through the appliance")
+        run_id = app.run_program(program["id"])["id"]
+        ended = app.wait_run(run_id, timeout=RUN_TIMEOUT)
+        log = (app.data_dir / "runs" / str(run_id) / "output.log").read_text()
+        through = parse(log)
+        if through is None:
+            say(f"[{BENCH}] the run ended {ended['state']} ({ended['reason']}):\n{log[-2000:]}")
+    say(f"[{BENCH}] baselines: rpc only, RobotApi + sim")
+    rpc_only = baseline("rpc", sample, file, work)
+    api_sim = baseline("api", sample, file, work)
+
+    rate = through and through["rate"]
+    figures.append(Figure(BENCH, "sensors() round trips/s through the appliance", rate,
+                          "calls/s", f">= {TARGET:,}", rate is not None and rate >= TARGET,
+                          f"payload {len(sample)} bytes of JSON"))  # fmt: skip
+    if through:
+        figures.append(Figure(BENCH, "  latency per call, median", through["p50"] * MS, "ms"))
+        figures.append(Figure(BENCH, "  latency per call, p99", through["p99"] * MS, "ms"))
+    for label, result in (("baseline: rpc server only, fixed reply", rpc_only),
+                          ("baseline: RobotApi + sim driver, no web tier", api_sim)):  # fmt: skip
+        value = result and result["rate"]
+        figures.append(Figure(BENCH, label, value, "calls/s"))
+        if value and rate:
+            figures.append(Figure(BENCH, "  appliance / this baseline", rate / value, "x"))
+    return figures
+
+
+if __name__ == "__main__":
+    if sys.argv[1:2] == ["serve"]:
+        serve(sys.argv[2], sys.argv[3])
+    else:
+        print_table(run())

@@ -1,0 +1,285 @@
+"""Program start overhead: Run request -> first output line, against the bare interpreter.
+
+Through the appliance: POST /api/programs/{id}/run, then at once the run's websocket
+(/ws/runs/{id}/, signed-in session cookie); the first output line counts whether it comes in
+the initial tail or in a later message. A thread watches the run's log file at the same time
+for "request -> first line in the log file".
+
+Baseline, measured in the same run and interleaved with it: the same interpreter running the
+same program file from this process (spawn -> first line read on a pipe), and the launcher's
+own command line (setpriv + prlimit + interpreter) built by programs.launcher.
+
+The programs print the time at their first statement (Python's time.time(), bash's
+$EPOCHREALTIME), which splits the latency into launch (request -> program running), capture
+(program -> log file) and streaming (log file -> websocket).
+
+Target: request -> first line on the websocket within 1.2 x the bare start + 15 ms.
+"""
+
+import os
+import subprocess
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+from benchmarks.common import (
+    MS,
+    Figure,
+    api_client,
+    appliance,
+    median,
+    parse_api_time,
+    percentile,
+    print_table,
+    runs_dir,
+    say,
+    session_cookie,
+    ws_connect,
+)
+from programs import launcher
+from programs.languages import get_language
+
+BENCH = "1 start overhead"
+RUNS = 20
+WARMUP = 2
+RUN_TIMEOUT = 10.0
+SOURCES = {
+    "python": "import time; print(time.time())\n",
+    "shell": "echo $EPOCHREALTIME\n",
+}
+
+
+class LogWatcher(threading.Thread):
+    """Finds the next run's folder and notes when its log file first holds an output line."""
+
+    def __init__(self, runs: Path, known: set[str], timeout: float = RUN_TIMEOUT):
+        super().__init__(daemon=True)
+        self.runs, self.known, self.timeout = runs, known, timeout
+        self.seen_at: float | None = None
+        self.data = b""
+        self.cancel = threading.Event()
+
+    def run(self) -> None:
+        deadline = time.perf_counter() + self.timeout
+        log = None
+        while not self.cancel.is_set() and time.perf_counter() < deadline:
+            if log is None:
+                try:
+                    new = [n for n in os.listdir(self.runs) if n not in self.known]
+                except FileNotFoundError:
+                    new = []
+                if new:
+                    log = self.runs / new[0] / "output.log"
+            if log is not None:
+                try:
+                    with open(log, "rb") as f:
+                        data = f.read(4096)
+                except FileNotFoundError:
+                    data = b""
+                if data.startswith(b"o ") or b"\no " in data:
+                    self.seen_at = time.perf_counter()
+                    self.data = data
+                    return
+            time.sleep(0.0003)
+
+
+def first_output(data: bytes) -> str:
+    for line in data.split(b"\n"):
+        if line.startswith(b"o "):
+            return line[2:].decode(errors="replace")
+    return ""
+
+
+def program_time(text: str) -> float | None:
+    try:
+        return float(text.strip().split()[0])
+    except (ValueError, IndexError):
+        return None
+
+
+def appliance_run(app, http, cookie: str, program_id: int, known: set[str]) -> dict:
+    runs = runs_dir(app)
+    watcher = LogWatcher(runs, known)
+    watcher.start()
+    wall0, t0 = time.time(), time.perf_counter()
+    response = http.post(f"/api/programs/{program_id}/run", json={"robot": "sim"})
+    t_response = time.perf_counter()
+    response.raise_for_status()
+    run_id = response.json()["id"]
+    known.add(str(run_id))
+    t_ws = t_open = None
+    in_tail = False
+    try:
+        with ws_connect(app, f"/ws/runs/{run_id}/", cookie) as ws:
+            t_open = time.perf_counter()
+            first = True
+            deadline = t0 + RUN_TIMEOUT
+            while time.perf_counter() < deadline:
+                message = ws.recv(timeout=max(0.01, deadline - time.perf_counter()))
+                if 'class="ln o"' in message:
+                    t_ws = time.perf_counter()
+                    in_tail = first and 'id="log-lines"' in message and "hx-swap-oob" not in message
+                    break
+                first = False
+    finally:
+        watcher.join(RUN_TIMEOUT)
+        watcher.cancel.set()
+    run = wait_ended(http, run_id)
+    stmt = program_time(first_output(watcher.data))
+    created, started = parse_api_time(run.get("created")), parse_api_time(run.get("started"))
+
+    def wall(t):
+        return None if t is None else wall0 + (t - t0)
+
+    return {
+        "ws": None if t_ws is None else t_ws - t0,
+        "file": None if watcher.seen_at is None else watcher.seen_at - t0,
+        "response": t_response - t0,
+        "ws_open": None if t_open is None else t_open - t0,
+        "in_tail": in_tail,
+        "created": None if created is None else created - wall0,
+        "started": None if started is None else started - wall0,
+        "statement": None if stmt is None else stmt - wall0,
+        "capture": None if stmt is None or watcher.seen_at is None else wall(watcher.seen_at) - stmt,
+        "stream": None if t_ws is None or watcher.seen_at is None else t_ws - watcher.seen_at,
+        "state": run["state"],
+    }
+
+
+def wait_ended(http, run_id: int) -> dict:
+    deadline = time.monotonic() + RUN_TIMEOUT
+    while True:
+        run = http.get(f"/api/runs/{run_id}").json()
+        if run["state"] not in ("starting", "running") or time.monotonic() > deadline:
+            return run
+        time.sleep(0.01)
+
+
+def bare_run(argv: list[str], env: dict[str, str], cwd: str) -> dict:
+    wall0, t0 = time.time(), time.perf_counter()
+    proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, env=env,
+                            cwd=cwd, start_new_session=True)  # fmt: skip
+    line = proc.stdout.readline()
+    t1 = time.perf_counter()
+    proc.wait()
+    proc.stdout.close()
+    stmt = program_time(line.decode(errors="replace"))
+    return {"first": t1 - t0, "statement": None if stmt is None else stmt - wall0}
+
+
+def probe_connect(app, http, cookie: str, run_id: int) -> dict:
+    """Costs with no program starting: an API GET, a websocket handshake + first message."""
+    t0 = time.perf_counter()
+    http.get(f"/api/runs/{run_id}").raise_for_status()
+    t1 = time.perf_counter()
+    with ws_connect(app, f"/ws/runs/{run_id}/", cookie) as ws:
+        t2 = time.perf_counter()
+        ws.recv(timeout=RUN_TIMEOUT)
+        t3 = time.perf_counter()
+    return {"get": t1 - t0, "open": t2 - t1, "first": t3 - t1}
+
+
+def stats(rows: list[dict], key: str) -> tuple[float, float, int]:
+    values = [r[key] for r in rows if r.get(key) is not None]
+    return median(values), percentile(values, 90), len(values)
+
+
+def run() -> list[Figure]:
+    figures: list[Figure] = []
+    work = Path(tempfile.mkdtemp(prefix="robotide-bench-bare-"))
+    languages = {name: get_language(name) for name in SOURCES}
+    bare_cmds: dict[str, tuple[list[str], dict]] = {}
+    for name, language in languages.items():
+        file = work / f"prog{language.extension}"
+        file.write_text(SOURCES[name])
+        env = launcher.environment(language, work, {})
+        bare_cmds[f"bare {name}"] = (language.command(str(file)), env)
+        limits = launcher.Limits()
+        bare_cmds[f"launcher {name}"] = (launcher.command(language, file, limits), env)
+    python = languages["python"].interpreter_path()
+    bare_cmds["python3 -u -c print(1)"] = ([python, "-u", "-c", "print(1)"], {"PATH": "/usr/bin"})
+    bare_cmds["sh -c 'echo 1'"] = (["/bin/sh", "-c", "echo 1"], {"PATH": "/usr/bin"})
+
+    bare: dict[str, list[dict]] = {k: [] for k in bare_cmds}
+    app_rows: dict[str, list[dict]] = {name: [] for name in SOURCES}
+    with appliance("start") as app:
+        http = api_client(app)
+        cookie = session_cookie(app)
+        programs = {
+            name: app.create_program(f"bench start {name}", source, language=name)["id"]
+            for name, source in SOURCES.items()
+        }
+        known: set[str] = set()
+        say(f"[{BENCH}] {WARMUP} warm-up + {RUNS} measured runs per language, interleaved"
+            " with the bare baselines")  # fmt: skip
+        for i in range(WARMUP + RUNS):
+            for key, (argv, env) in bare_cmds.items():
+                row = bare_run(argv, env, str(work))
+                if i >= WARMUP:
+                    bare[key].append(row)
+            for name, program_id in programs.items():
+                row = appliance_run(app, http, cookie, program_id, known)
+                if i >= WARMUP:
+                    app_rows[name].append(row)
+                time.sleep(0.02)
+        last = max(int(k) for k in known)
+        probes = [probe_connect(app, http, cookie, last) for _ in range(10)]
+        http.close()
+
+    for name in SOURCES:
+        rows = app_rows[name]
+        b_med, b_p90, _ = stats(bare[f"bare {name}"], "first")
+        for label, (value, base) in {
+            "median": (stats(rows, "ws")[0], b_med),
+            "p90": (stats(rows, "ws")[1], b_p90),
+        }.items():
+            bound = 1.2 * base + 0.015
+            figures.append(Figure(
+                BENCH, f"{name}: request -> first line on websocket, {label}", value * MS, "ms",
+                f"<= {bound * MS:.1f} ms (1.2 x {base * MS:.1f} + 15)", value <= bound,
+            ))  # fmt: skip
+        f_med, f_p90, _ = stats(rows, "file")
+        figures.append(Figure(BENCH, f"{name}: request -> first line in log file, median",
+                              f_med * MS, "ms"))  # fmt: skip
+        figures.append(Figure(BENCH, f"{name}: request -> first line in log file, p90",
+                              f_p90 * MS, "ms"))  # fmt: skip
+        figures.append(Figure(BENCH, f"{name}: bare start (same file) -> first line, median",
+                              b_med * MS, "ms", note=" ".join(bare_cmds[f"bare {name}"][0][:-1])
+                              + " FILE, from this process"))  # fmt: skip
+        figures.append(Figure(BENCH, f"{name}: bare start, p90", b_p90 * MS, "ms"))
+        figures.append(Figure(BENCH, f"{name}: launcher chain (setpriv+prlimit), median",
+                              stats(bare[f"launcher {name}"], "first")[0] * MS, "ms"))  # fmt: skip
+        # Where the time goes (medians), from the program's own clock at its first statement.
+        parts = [
+            ("request -> HTTP response", "response"),
+            ("request -> run row created", "created"),
+            ("request -> run marked running", "started"),
+            ("request -> program's first statement", "statement"),
+            ("first statement -> log file", "capture"),
+            ("log file -> websocket", "stream"),
+            ("request -> websocket open", "ws_open"),
+        ]
+        for label, key in parts:
+            value = stats(rows, key)[0]
+            figures.append(Figure(BENCH, f"{name}:   {label}, median", value * MS, "ms"))
+        figures.append(Figure(BENCH, f"{name}:   bare spawn -> first statement, median",
+                              stats(bare[f"bare {name}"], "statement")[0] * MS, "ms"))  # fmt: skip
+        tail = sum(1 for r in rows if r["in_tail"])
+        bad = [r["state"] for r in rows if r["state"] != "finished"]
+        note = f"first line came in the initial tail in {tail} of {len(rows)} runs"
+        if bad:
+            note += f"; runs not finished: {bad}"
+        figures[-1].note = note
+    for key in ("python3 -u -c print(1)", "sh -c 'echo 1'"):
+        figures.append(Figure(BENCH, f"bare {key} -> first line, median",
+                              stats(bare[key], "first")[0] * MS, "ms"))  # fmt: skip
+    for label, key in [("API GET /api/runs/{id} round trip", "get"),
+                       ("websocket open, existing run", "open"),
+                       ("websocket open -> first message (log tail), existing run", "first")]:
+        figures.append(Figure(BENCH, f"{label}, median", stats(probes, key)[0] * MS, "ms"))
+    return figures
+
+
+if __name__ == "__main__":
+    print_table(run())

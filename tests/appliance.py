@@ -1,0 +1,192 @@
+"""A real robotide appliance in subprocesses, for end-to-end tests and benchmarks.
+
+Embedded: `robotide up` alone (SQLite, in-memory layer, agent in the server process).
+Split: `robotide up` with REDIS_URL and DATABASE_URL (a fresh PostgreSQL database) plus
+`robotide agent sim` as its own process.
+"""
+
+import json
+import os
+import re
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import httpx
+
+ROOT = Path(__file__).resolve().parent.parent
+ROBOTIDE = str(Path(sys.executable).parent / "robotide")
+ADMIN_PASSWORD = "admin-pass-1234"
+POSTGRES = os.environ.get("ROBOTIDE_TEST_POSTGRES", "postgresql://postgres@127.0.0.1:5432")
+REDIS = os.environ.get("ROBOTIDE_TEST_REDIS", "redis://127.0.0.1:6379")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_for(predicate, timeout=20.0, interval=0.05, what="condition"):
+    deadline = time.monotonic() + timeout
+    last = None
+    while time.monotonic() < deadline:
+        try:
+            last = predicate()
+            if last:
+                return last
+        except Exception as exc:  # not up yet
+            last = exc
+        time.sleep(interval)
+    raise TimeoutError(f"timed out waiting for {what} (last: {last!r})")
+
+
+class Appliance:
+    def __init__(self, data_dir: Path, mode: str = "embedded", extra_env: dict | None = None):
+        self.data_dir = data_dir
+        self.mode = mode
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.processes: list[subprocess.Popen] = []
+        self.env = {
+            **os.environ,
+            "ROBOTIDE_DATA": str(data_dir),
+            "ROBOTIDE_ADMIN_PASSWORD": ADMIN_PASSWORD,
+            "PYTHONUNBUFFERED": "1",
+            **(extra_env or {}),
+        }
+        self.env.pop("REDIS_URL", None) if mode == "embedded" else None
+        self.database = None
+
+    # -- life cycle ---------------------------------------------------------------------------
+
+    def start(self) -> "Appliance":
+        if self.mode == "split":
+            self._create_database()
+            self.env["REDIS_URL"] = f"{REDIS}/{_redis_db()}"
+        self.server = self._spawn("up", "--bind", f"127.0.0.1:{self.port}")
+        wait_for(lambda: httpx.get(f"{self.url}/accounts/login/").status_code == 200,
+                 what="the web server")  # fmt: skip
+        if self.mode == "split":
+            self.agent = self._spawn("agent", "sim")
+        self.token = self.cli("token", "admin").strip()
+        wait_for(lambda: self.api("GET", "/api/robots/sim/sensors").status_code == 200,
+                 what="the sim robot's agent")  # fmt: skip
+        return self
+
+    def _spawn(self, *args) -> subprocess.Popen:
+        log = open(self.data_dir / f"{args[0]}-{len(self.processes)}.log", "w")  # noqa: SIM115
+        proc = subprocess.Popen(
+            [ROBOTIDE, *args], env=self.env, stdout=log, stderr=subprocess.STDOUT, cwd=ROOT
+        )
+        self.processes.append(proc)
+        return proc
+
+    def cli(self, *args) -> str:
+        return subprocess.run([ROBOTIDE, *args], env=self.env, check=True, capture_output=True,
+                              text=True, cwd=ROOT).stdout  # fmt: skip
+
+    def stop(self) -> None:
+        for proc in reversed(self.processes):
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+        for proc in self.processes:
+            try:
+                proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        if self.database:
+            self._drop_database()
+
+    def logs(self) -> str:
+        return "\n".join(p.read_text() for p in sorted(self.data_dir.glob("*.log")))
+
+    # -- PostgreSQL ---------------------------------------------------------------------------
+
+    def _create_database(self) -> None:
+        import psycopg
+
+        self.database = f"robotide_test_{uuid.uuid4().hex[:10]}"
+        with psycopg.connect(f"{POSTGRES}/postgres", autocommit=True) as conn:
+            conn.execute(f'CREATE DATABASE "{self.database}"')
+        self.env["DATABASE_URL"] = f"{POSTGRES}/{self.database}"
+
+    def _drop_database(self) -> None:
+        import psycopg
+
+        with psycopg.connect(f"{POSTGRES}/postgres", autocommit=True) as conn:
+            conn.execute(f'DROP DATABASE IF EXISTS "{self.database}" WITH (FORCE)')
+
+    # -- HTTP ---------------------------------------------------------------------------------
+
+    def api(self, method: str, path: str, body=None, token: str | None = None) -> httpx.Response:
+        headers = {"Authorization": f"Bearer {token or self.token}"}
+        return httpx.request(method, self.url + path, json=body, headers=headers, timeout=10)
+
+    def new_user(self, username: str, password: str = "user-pass-1234", staff: bool = False) -> str:
+        """Create a user; returns an API token for them."""
+        code = (
+            "from django.contrib.auth import get_user_model;"
+            f"get_user_model().objects.create_user({username!r}, password={password!r},"
+            f" is_staff={staff!r})"
+        )
+        self.cli("manage", "shell", "-c", code)
+        return self.cli("token", username).strip()
+
+    def session(self, username: str = "admin", password: str = ADMIN_PASSWORD) -> httpx.Client:
+        """A browser-like signed-in client (session cookie + CSRF)."""
+        client = httpx.Client(base_url=self.url, follow_redirects=True, timeout=10)
+        page = client.get("/accounts/login/")
+        csrf = re.search(r'name="csrfmiddlewaretoken" value="([^"]+)"', page.text).group(1)
+        response = client.post(
+            "/accounts/login/", data={"username": username, "password": password,
+                                      "csrfmiddlewaretoken": csrf},
+        )  # fmt: skip
+        assert "Sign out" in response.text, "login failed"
+        return client
+
+    def wait_run(self, run_id: int, states=("finished", "failed", "stopped", "lost"), timeout=20):
+        def done():
+            run = self.api("GET", f"/api/runs/{run_id}").json()
+            return run if run["state"] in states else None
+
+        return wait_for(done, timeout=timeout, what=f"run {run_id} in {states}")
+
+    def create_program(self, name: str, source: str, language: str = "python", token=None) -> dict:
+        body = {"name": name, "language": language, "source": source}
+        response = self.api("POST", "/api/programs", body, token=token)
+        assert response.status_code == 201, response.text
+        return response.json()
+
+    def run_program(self, program_id: int, robot: str = "sim", token=None) -> dict:
+        response = self.api(
+            "POST", f"/api/programs/{program_id}/run", {"robot": robot}, token=token
+        )
+        assert response.status_code == 201, response.text
+        return response.json()
+
+
+def _redis_db() -> int:
+    # A database of its own per run keeps parallel test sessions apart; flushed before use.
+    import redis
+
+    db = 7 + (os.getpid() % 8)
+    redis.Redis.from_url(f"{REDIS}/{db}").flushdb()
+    return db
+
+
+def cookie_header(client: httpx.Client) -> str:
+    return "; ".join(f"{k}={v}" for k, v in client.cookies.items())
+
+
+def pretty(obj) -> str:
+    return json.dumps(obj, indent=2)
+
+
+def remove(path: Path) -> None:
+    shutil.rmtree(path, ignore_errors=True)

@@ -1,0 +1,40 @@
+import os
+
+import pytest
+
+from tests.appliance import Appliance
+
+
+def pytest_configure(config):
+    # Nothing is skipped in CI: a missing service or browser is a failure there.
+    config.addinivalue_line("markers", "split: needs PostgreSQL and Redis")
+
+
+@pytest.fixture(autouse=True)
+def _runs_dir(settings, tmp_path):
+    settings.RUNS_DIR = tmp_path / "runs"
+
+
+@pytest.fixture(scope="module")
+def appliance(tmp_path_factory):
+    app = Appliance(tmp_path_factory.mktemp("appliance")).start()
+    yield app
+    app.stop()
+
+
+@pytest.fixture(scope="module", params=["embedded", "split"])
+def any_appliance(request, tmp_path_factory):
+    """The same end-to-end tests, once per deployment mode."""
+    app = Appliance(tmp_path_factory.mktemp(request.param), mode=request.param)
+    try:
+        app.start()
+    except Exception:
+        print(app.logs())
+        app.stop()
+        raise
+    yield app
+    app.stop()
+
+
+def in_ci() -> bool:
+    return os.environ.get("CI", "").lower() in ("1", "true", "yes")

@@ -1,0 +1,182 @@
+"""The Robot API protocol over a real socket, served by a real agent's methods and sim robot."""
+
+import asyncio
+import json
+import sys
+
+import pytest
+
+import rhal
+from programs.languages import CLIENTS_DIR
+from robots.agent import ActiveRun, RobotAgent
+
+sys.path.insert(0, str(CLIENTS_DIR / "python"))
+import robot as robot_client  # noqa: E402  (the client programs get on their path)
+
+
+@pytest.fixture
+async def agent():
+    agent = RobotAgent("sim")
+    agent.driver = rhal.connect("sim://", max_linear=0.5)
+    await agent.driver.open()
+    agent.api_address = await agent.server.start()
+    yield agent
+    await agent.server.close()
+    await agent.driver.close()
+
+
+def admit(agent, token="good-token", run_id=7) -> ActiveRun:
+    active = ActiveRun(run_id, token, process=None)
+    agent.tokens[token] = active
+    agent.runs[run_id] = active
+    return active
+
+
+def end(agent, active):
+    agent.tokens.pop(active.token)
+    agent.runs.pop(active.run_id)
+
+
+class Conn:
+    def __init__(self, reader, writer):
+        self.reader, self.writer, self.next_id = reader, writer, 0
+
+    async def send_raw(self, data: bytes):
+        self.writer.write(data)
+        await self.writer.drain()
+        return json.loads(await self.reader.readline())
+
+    async def call(self, method, *params):
+        self.next_id += 1
+        request = {"jsonrpc": "2.0", "id": self.next_id, "method": method, "params": list(params)}
+        return await self.send_raw(json.dumps(request).encode() + b"\n")
+
+
+@pytest.fixture
+async def conn(agent):
+    host, port = agent.api_address.rsplit(":", 1)
+    reader, writer = await asyncio.open_connection(host, int(port))
+    yield Conn(reader, writer)
+    writer.close()
+
+
+async def test_invalid_json_is_a_parse_error_and_the_connection_goes_on(agent, conn):
+    reply = await conn.send_raw(b"{not json\n")
+    assert reply["error"]["code"] == -32700 and reply["id"] is None
+    admit(agent)
+    assert (await conn.call("auth", "good-token"))["result"]["run"] == 7
+
+
+async def test_a_request_without_jsonrpc_version_is_invalid(conn):
+    reply = await conn.send_raw(b'{"id": 1, "method": "sensors"}\n')
+    assert reply["error"]["code"] == -32600
+
+
+async def test_methods_need_auth_first(conn):
+    reply = await conn.call("sensors")
+    assert reply["error"]["code"] == -32001
+    assert "auth" in reply["error"]["message"]
+
+
+async def test_a_wrong_token_is_refused(agent, conn):
+    admit(agent)
+    reply = await conn.call("auth", "someone-elses-guess")
+    assert reply["error"]["code"] == -32001
+    assert (await conn.call("sensors"))["error"]["code"] == -32001
+
+
+async def test_a_token_is_worthless_once_its_run_ended(agent, conn):
+    active = admit(agent)
+    await conn.call("auth", "good-token")
+    assert "result" in await conn.call("sensors")
+    end(agent, active)
+    reply = await conn.call("sensors")
+    assert reply["error"]["code"] == -32001 and "ended" in reply["error"]["message"]
+    assert (await conn.call("auth", "good-token"))["error"]["code"] == -32001
+
+
+async def test_drive_is_clamped_to_the_robot_limits(agent, conn):
+    active = admit(agent)
+    await conn.call("auth", "good-token")
+    reply = await conn.call("drive", 5.0, 0.0)
+    assert reply["result"] == {"linear": 0.5, "angular": 0.0}
+    assert active.drove
+    await asyncio.sleep(0.2)
+    assert (await conn.call("sensors"))["result"]["velocity"]["linear"] == 0.5
+
+
+async def test_bad_params_are_invalid_params(agent, conn):
+    admit(agent)
+    await conn.call("auth", "good-token")
+    assert (await conn.call("drive", "fast", 0))["error"]["code"] == -32602
+    assert (await conn.call("drive"))["error"]["code"] == -32602
+    assert (await conn.call("drive", 1, 2, 3))["error"]["code"] == -32602
+    named = await conn.send_raw(
+        b'{"jsonrpc":"2.0","id":9,"method":"drive","params":{"linear":0.1,"angular":0.2}}\n'
+    )
+    assert named["result"] == {"linear": 0.1, "angular": 0.2}
+
+
+async def test_unknown_method_and_missing_sensor_are_clear_errors(agent, conn):
+    admit(agent)
+    await conn.call("auth", "good-token")
+    reply = await conn.call("fly")
+    assert reply["error"]["code"] == -32601 and "drive" in reply["error"]["message"]
+    reply = await conn.call("sensor", "gps")
+    assert reply["error"]["code"] == -32000 and "gps" in reply["error"]["message"]
+    assert (await conn.call("sensor", "heading"))["result"] == 0.0
+
+
+async def test_batches_and_notifications(agent, conn):
+    admit(agent)
+    await conn.call("auth", "good-token")
+    batch = [
+        {"jsonrpc": "2.0", "id": 1, "method": "sensor", "params": ["range"]},
+        {"jsonrpc": "2.0", "method": "stop"},  # a notification: no reply
+        {"jsonrpc": "2.0", "id": 2, "method": "capabilities"},
+    ]
+    replies = await conn.send_raw(json.dumps(batch).encode() + b"\n")
+    assert [r["id"] for r in replies] == [1, 2]
+    assert replies[1]["result"]["kind"] == "sim"
+
+
+async def test_show_keeps_values_and_refuses_bad_ones(agent, conn):
+    admit(agent)
+    await conn.call("auth", "good-token")
+    assert "result" in await conn.call("show", "heading", 42)
+    assert "result" in await conn.call("show", "compass", "<svg></svg>")
+    assert agent.shows["heading"]["value"] == 42 and agent.shows["compass"]["run"] == 7
+    assert (await conn.call("show", "", 1))["error"]["code"] == -32602
+    assert (await conn.call("show", "x", {"a": 1}))["error"]["code"] == -32602
+    assert (await conn.call("show", "x", "y" * 300_000))["error"]["code"] == -32602
+
+
+async def test_a_request_too_large_is_refused(agent, conn):
+    reply = await conn.send_raw(
+        b'{"jsonrpc":"2.0","id":1,"method":"x","params":["' + b"a" * 1_100_000 + b'"]}\n'
+    )
+    assert reply["error"]["code"] == -32600
+
+
+async def test_the_python_client_round_trip(agent):
+    admit(agent)
+
+    def program():
+        bot = robot_client.Robot(agent.api_address, "good-token")
+        applied = bot.drive(0.2, 0.0)
+        heading = bot.sensors()["heading"]
+        try:
+            bot.sensor("gps")
+        except robot_client.RobotError as exc:
+            error = (exc.code, str(exc))
+        bot.close()
+        return applied, heading, error
+
+    applied, heading, error = await asyncio.to_thread(program)
+    assert applied == {"linear": 0.2, "angular": 0.0} and heading == 0.0
+    assert error[0] == -32000 and "gps" in error[1]
+
+
+async def test_the_python_client_refuses_a_wrong_token(agent):
+    with pytest.raises(robot_client.RobotError, match="invalid token"):
+        await asyncio.to_thread(robot_client.Robot, agent.api_address, "nope")
