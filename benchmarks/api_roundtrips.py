@@ -21,12 +21,10 @@ import re
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 from types import SimpleNamespace
 
 from benchmarks.common import (
-    MS,
     Figure,
     appliance,
     print_table,
@@ -92,8 +90,7 @@ def serve(mode: str, sample: str) -> None:
             driver = rhal.connect("sim://")
             await driver.open()
             active = SimpleNamespace(run_id=0, token=TOKEN, drove=False)
-            agent = SimpleNamespace(name="bench", tokens={TOKEN: active}, shows={},
-                                    driver=driver)  # fmt: skip
+            agent = SimpleNamespace(name="bench", tokens={TOKEN: active}, shows={}, driver=driver)
             handler = RobotApi(agent).handle
         server = RobotApiServer(handler)
         print(await server.start(), flush=True)
@@ -108,14 +105,22 @@ def baseline(mode: str, sample: str, file: Path, work: Path) -> dict | None:
 
     server = subprocess.Popen(
         [sys.executable, "-m", "benchmarks.api_roundtrips", "serve", mode, sample],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         address = server.stdout.readline().strip()
         language = get_language("python")
         env = launcher.environment(language, work, {"ROBOT_API": address, "ROBOT_TOKEN": TOKEN})
-        done = subprocess.run(language.command(str(file)), env=env, cwd=work, capture_output=True,
-                              text=True, timeout=RUN_TIMEOUT)  # fmt: skip
+        done = subprocess.run(
+            language.command(str(file)),
+            env=env,
+            cwd=work,
+            capture_output=True,
+            text=True,
+            timeout=RUN_TIMEOUT,
+        )
         result = parse(done.stdout)
         if result is None:
             say(f"[{BENCH}] baseline {mode} printed: {done.stdout!r} {done.stderr!r}")
@@ -126,6 +131,13 @@ def baseline(mode: str, sample: str, file: Path, work: Path) -> dict | None:
             server.wait(timeout=5)
         except subprocess.TimeoutExpired:
             server.kill()
+
+
+def latency_note(result: dict | None) -> str:
+    if not result:
+        return "no result"
+    p50, p99 = result["p50"] * 1e6, result["p99"] * 1e6
+    return f"latency per call: median {p50:.0f} µs, p99 {p99:.0f} µs"
 
 
 def run() -> list[Figure]:
@@ -148,16 +160,26 @@ def run() -> list[Figure]:
     api_sim = baseline("api", sample, file, work)
 
     rate = through and through["rate"]
-    figures.append(Figure(BENCH, "sensors() round trips/s through the appliance", rate,
-                          "calls/s", f">= {TARGET:,}", rate is not None and rate >= TARGET,
-                          f"payload {len(sample)} bytes of JSON"))  # fmt: skip
+    figures.append(
+        Figure(
+            BENCH,
+            "sensors() round trips/s through the appliance",
+            rate,
+            "calls/s",
+            f">= {TARGET:,}",
+            rate is not None and rate >= TARGET,
+            f"payload {len(sample)} bytes of JSON",
+        )
+    )
     if through:
-        figures.append(Figure(BENCH, "  latency per call, median", through["p50"] * MS, "ms"))
-        figures.append(Figure(BENCH, "  latency per call, p99", through["p99"] * MS, "ms"))
-    for label, result in (("baseline: rpc server only, fixed reply", rpc_only),
-                          ("baseline: RobotApi + sim driver, no web tier", api_sim)):  # fmt: skip
+        figures.append(Figure(BENCH, "  latency per call, median", through["p50"] * 1e6, "us"))
+        figures.append(Figure(BENCH, "  latency per call, p99", through["p99"] * 1e6, "us"))
+    for label, result in (
+        ("baseline: rpc server only, fixed reply", rpc_only),
+        ("baseline: RobotApi + sim driver, no web tier", api_sim),
+    ):
         value = result and result["rate"]
-        figures.append(Figure(BENCH, label, value, "calls/s"))
+        figures.append(Figure(BENCH, label, value, "calls/s", note=latency_note(result)))
         if value and rate:
             figures.append(Figure(BENCH, "  appliance / this baseline", rate / value, "x"))
     return figures

@@ -41,6 +41,8 @@ class Figure:
         v = self.value
         if self.unit in ("lines/s", "calls/s"):
             return f"{v:,.0f} {self.unit}"
+        if self.unit == "us":
+            return f"{v:,.0f} µs"
         if self.unit == "ms":
             return f"{v:.1f} ms"
         if self.unit == "MB":
@@ -59,8 +61,9 @@ def verdict(ok: bool | None) -> str:
 def print_table(figures: list[Figure], title: str = "robotide benchmarks") -> None:
     headers = ("benchmark", "figure", "value", "target", "meets")
     rows = [(f.bench, f.name, f.shown(), f.target, verdict(f.ok)) for f in figures]
-    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h)
-              for i, h in enumerate(headers)]  # fmt: skip
+    widths = [
+        max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(headers)
+    ]
     line = "  ".join("-" * w for w in widths)
     print()
     print(title)

@@ -138,8 +138,14 @@ class LiveClient(threading.Thread):
 def bare_flood(argv: list[str], env: dict, cwd: str) -> dict:
     """The producer alone: its stdout a pipe read here in 64 KB chunks."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, env=env, cwd=cwd)  # fmt: skip
+    proc = subprocess.Popen(
+        argv,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+        cwd=cwd,
+    )
     fd = proc.stdout.fileno()
     lines = 0
     first = None
@@ -256,16 +262,34 @@ def flood_figures(name: str, bare: dict, flood: dict) -> list[Figure]:
     producer = producer_rate(flood["stderr"])
     if producer:
         note += f"; the producer itself reported {producer:,.0f} lines/s"
-    figures.append(Figure(BENCH, f"{name}: lines/s captured to the log file", rate, "lines/s",
-                          f">= {TARGET_RATE:,}", rate is not None and rate >= TARGET_RATE,
-                          note))  # fmt: skip
-    figures.append(Figure(BENCH, f"{name}: lines lost in the log (of {N:,})", lost, "", "0",
-                          lost == 0 and intact))  # fmt: skip
+    figures.append(
+        Figure(
+            BENCH,
+            f"{name}: lines/s captured to the log file",
+            rate,
+            "lines/s",
+            f">= {TARGET_RATE:,}",
+            rate is not None and rate >= TARGET_RATE,
+            note,
+        )
+    )
+    figures.append(
+        Figure(
+            BENCH, f"{name}: lines lost in the log (of {N:,})", lost, "", "0", lost == 0 and intact
+        )
+    )
     bare_note = ""
     if bare_rate := producer_rate(bare["stderr"]):
         bare_note = f"the producer itself reported {bare_rate:,.0f} lines/s"
-    figures.append(Figure(BENCH, f"{name}: baseline, bare producer -> pipe", bare["rate"],
-                          "lines/s", note=bare_note))  # fmt: skip
+    figures.append(
+        Figure(
+            BENCH,
+            f"{name}: baseline, bare producer -> pipe",
+            bare["rate"],
+            "lines/s",
+            note=bare_note,
+        )
+    )
     if rate:
         figures.append(Figure(BENCH, f"{name}: captured / bare", rate / bare["rate"], "x"))
     figures.append(Figure(BENCH, f"{name}: request -> whole log written", flood["done"], "s"))
@@ -273,26 +297,38 @@ def flood_figures(name: str, bare: dict, flood: dict) -> list[Figure]:
     live_window = (live.last - live.first) if live.first and live.last else None
     live_rate = live.shown / window if rate else None
     accounted = live.shown + live.skipped
-    live_note = (f"{live.messages} messages over {live_window or 0:.2f} s; shown + noted as not"
-                 f" shown = {accounted:,} of {N:,} output lines")  # fmt: skip
+    live_note = (
+        f"{live.messages} messages over {live_window or 0:.2f} s; shown + noted as not"
+        f" shown = {accounted:,} of {N:,} output lines"
+    )
     if not live.ended:
         live_note += "; the final line never arrived"
     if live.error:
         live_note += f"; websocket error: {live.error}"
-    figures.append(Figure(BENCH, f"{name}: lines shown live on the websocket", live.shown, "",
-                          note=live_note))  # fmt: skip
-    figures.append(Figure(BENCH, f"{name}: lines shown live per second of flood", live_rate,
-                          "lines/s"))  # fmt: skip
+    figures.append(
+        Figure(BENCH, f"{name}: lines shown live on the websocket", live.shown, "", note=live_note)
+    )
+    figures.append(
+        Figure(BENCH, f"{name}: lines shown live per second of flood", live_rate, "lines/s")
+    )
     figures.append(Figure(BENCH, f"{name}: lines noted 'not shown live'", live.skipped, ""))
     growth = flood["rss_peak"] - flood["rss_before"]
-    figures.append(Figure(BENCH, f"{name}: server peak RSS growth during the flood", growth / MB,
-                          "MB", f"<= {MEMORY_GROWTH_BOUND // MB} MB",
-                          growth <= MEMORY_GROWTH_BOUND,
-                          f"RSS before {flood['rss_before'] / MB:.1f} MB, peak"
-                          f" {flood['rss_peak'] / MB:.1f} MB, 1 s after {flood['rss_after'] / MB:.1f}"
-                          f" MB, VmHWM {flood['hwm'] / MB:.1f} MB"))  # fmt: skip
-    figures.append(Figure(BENCH, f"{name}: server CPU per million lines", flood["cpu"] / N * 1e6,
-                          "s"))  # fmt: skip
+    figures.append(
+        Figure(
+            BENCH,
+            f"{name}: server peak RSS growth during the flood",
+            growth / MB,
+            "MB",
+            f"<= {MEMORY_GROWTH_BOUND // MB} MB",
+            growth <= MEMORY_GROWTH_BOUND,
+            f"RSS before {flood['rss_before'] / MB:.1f} MB, peak"
+            f" {flood['rss_peak'] / MB:.1f} MB, 1 s after {flood['rss_after'] / MB:.1f}"
+            f" MB, VmHWM {flood['hwm'] / MB:.1f} MB",
+        )
+    )
+    figures.append(
+        Figure(BENCH, f"{name}: server CPU per million lines", flood["cpu"] / N * 1e6, "s")
+    )
     return figures
 
 

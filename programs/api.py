@@ -4,6 +4,7 @@ from django.db import IntegrityError
 from django.http import HttpResponse, StreamingHttpResponse
 from ninja import Field, Router, Schema
 from ninja.errors import HttpError
+from ninja.responses import Status
 from pydantic import field_validator
 
 from programs.access import get_program_for_user, get_run_for_user, programs_for_user, runs_for_user
@@ -99,9 +100,9 @@ def create_program(request, data: ProgramIn):
     try:
         program = Program.objects.create(owner=request.user, name=data.name, language=data.language)
     except IntegrityError:
-        return 409, {"detail": f"You already have a program named {data.name!r}."}
+        return Status(409, {"detail": f"You already have a program named {data.name!r}."})
     program.save_source(data.source, request.user)
-    return 201, _program_out(program)
+    return Status(201, _program_out(program))
 
 
 @programs_router.get("/{int:program_id}", response=ProgramOut)
@@ -119,21 +120,21 @@ def update_program(request, program_id: int, data: ProgramUpdate):
     try:
         program.save_source(program.source if data.source is None else data.source, request.user)
     except IntegrityError:
-        return 409, {"detail": f"You already have a program named {data.name!r}."}
-    return 200, _program_out(program)
+        return Status(409, {"detail": f"You already have a program named {data.name!r}."})
+    return Status(200, _program_out(program))
 
 
 @programs_router.delete("/{int:program_id}", response={204: None})
 def delete_program(request, program_id: int):
     get_program_for_user(request.user, program_id).delete()
-    return 204, None
+    return Status(204, None)
 
 
 @programs_router.post("/{int:program_id}/run", response={201: RunOut})
 def run_program(request, program_id: int, data: RunIn):
     program = get_program_for_user(request.user, program_id)
     robot = get_robot_for_user(request.user, data.robot)
-    return 201, start_run(program, robot, request.user, data.args)
+    return Status(201, start_run(program, robot, request.user, data.args))
 
 
 @programs_router.get("/languages", response=list[dict], auth=None)

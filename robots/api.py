@@ -3,6 +3,7 @@ from urllib.parse import urlsplit
 from django.db import IntegrityError
 from ninja import Field, Router, Schema
 from ninja.errors import HttpError
+from ninja.responses import Status
 from pydantic import field_validator
 
 import rhal
@@ -52,9 +53,9 @@ def create_robot(request, data: RobotIn):
     try:
         robot = Robot.objects.create(**data.dict())
     except IntegrityError:
-        return 409, {"detail": f"A robot named {data.name!r} exists already."}
+        return Status(409, {"detail": f"A robot named {data.name!r} exists already."})
     announce_robot_sync(robot.name)
-    return 201, robot
+    return Status(201, robot)
 
 
 @robots_router.get("/{name}", response=RobotOut)

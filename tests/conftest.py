@@ -11,8 +11,9 @@ def pytest_configure(config):
 
 
 @pytest.fixture(autouse=True)
-def _runs_dir(settings, tmp_path):
+def _test_settings(settings, tmp_path):
     settings.RUNS_DIR = tmp_path / "runs"
+    settings.PASSWORD_HASHERS = ["django.contrib.auth.hashers.MD5PasswordHasher"]
 
 
 @pytest.fixture(scope="module")

@@ -345,6 +345,8 @@ def test_robot_page_shows_sensors_camera_and_program_drawings(page, appliance, s
         "() => { const img = document.getElementById('camera');"
         " return img.complete && img.naturalWidth === 320; }"
     )
+    # The picture is fetched again and again while the page is open.
+    expect(page.locator("#camera")).to_have_attribute("src", re.compile(r"camera\.jpg\?t=\d+$"))
     expect(page.locator("#shows .show")).to_have_count(0)
 
     compass = next(

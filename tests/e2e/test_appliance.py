@@ -3,7 +3,6 @@
 import re
 import time
 
-import pytest
 from websockets.sync.client import connect
 
 from tests.appliance import cookie_header, wait_for
