@@ -82,8 +82,12 @@ def test_compare_and_restore_a_revision(client, alice, program):
 def test_save_as_makes_a_copy(client, alice, program):
     response = client.post(
         f"/programs/{program.pk}/",
-        {"source": "print('copy')\n", "language": "python", "save_as": "hello 2",
-         "action": "save_as"},  # fmt: skip
+        {
+            "source": "print('copy')\n",
+            "language": "python",
+            "save_as": "hello 2",
+            "action": "save_as",
+        },  # fmt: skip
     )
     copy = Program.objects.get(owner=alice, name="hello 2")
     assert response["Location"] == f"/programs/{copy.pk}/"
@@ -114,9 +118,7 @@ def test_download_and_upload(client, alice, program):
 def test_upload_refuses_unknown_types_and_binary(client, alice):
     bad = client.post("/programs/upload", {"file": SimpleUploadedFile("x.exe", b"MZ")})
     assert bad.status_code == 400 and "Choose a language" in bad.content.decode()
-    binary = client.post(
-        "/programs/upload", {"file": SimpleUploadedFile("x.py", b"\xff\xfe\x00")}
-    )
+    binary = client.post("/programs/upload", {"file": SimpleUploadedFile("x.py", b"\xff\xfe\x00")})
     assert binary.status_code == 400 and "UTF-8" in binary.content.decode()
 
 

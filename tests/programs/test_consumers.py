@@ -1,0 +1,103 @@
+"""The websocket consumers: access checks, the log tail, the live lines, the state."""
+
+import pytest
+from channels.db import database_sync_to_async
+from channels.layers import get_channel_layer
+from channels.testing import WebsocketCommunicator
+from django.contrib.auth.models import AnonymousUser, User
+
+from programs.consumers import RunConsumer, RunListConsumer
+from programs.models import Program, Run
+from robots.bus import RUNS_GROUP, run_group
+from robots.consumers import RobotConsumer
+from robots.models import Robot
+
+pytestmark = pytest.mark.django_db(transaction=True)
+
+
+@database_sync_to_async
+def make_run(log: bytes):
+    alice = User.objects.create_user("alice")
+    bob = User.objects.create_user("bob")
+    robot = Robot.objects.create(name="sim", url="sim://")
+    program = Program.objects.create(owner=alice, name="p", language="python")
+    run = Run.create_for(program, robot, alice)
+    run.log_path.parent.mkdir(parents=True)
+    run.log_path.write_bytes(log)
+    return alice, bob, run
+
+
+def communicator(consumer, path, user, **kwargs):
+    comm = WebsocketCommunicator(consumer.as_asgi(), path)
+    comm.scope["user"] = user
+    comm.scope["url_route"] = {"kwargs": kwargs}
+    return comm
+
+
+async def test_the_run_stream_starts_with_the_log_and_skips_what_it_already_sent():
+    alice, _, run = await make_run(b"o first\ne oops\no partial line without end")
+    comm = communicator(RunConsumer, f"/ws/runs/{run.pk}/", alice, run_id=run.pk)
+    connected, _ = await comm.connect()
+    assert connected
+    tail = await comm.receive_from()
+    assert (
+        tail
+        == '<div id="log-lines"><div class="ln o">first</div><div class="ln e">oops</div></div>'
+    )
+    assert 'id="run-status"' in await comm.receive_from()
+    layer = get_channel_layer()
+    lines = [[0, "o", "first"], [8, "e", "oops"], [15, "o", "partial line without end"]]
+    await layer.group_send(
+        run_group(run.pk), {"type": "run.output", "run_id": run.pk, "lines": lines, "skipped": 0}
+    )
+    appended = await comm.receive_from()
+    assert appended == (
+        '<div id="log-lines" hx-swap-oob="beforeend">'
+        '<div class="ln o">partial line without end</div></div>'
+    )
+    await comm.disconnect()
+
+
+async def test_another_users_run_stream_is_refused():
+    _, bob, run = await make_run(b"o secret\n")
+    comm = communicator(RunConsumer, f"/ws/runs/{run.pk}/", bob, run_id=run.pk)
+    connected, code = await comm.connect()
+    assert not connected
+
+
+async def test_the_run_list_needs_a_signed_in_user():
+    comm = communicator(RunListConsumer, "/ws/runs/", AnonymousUser())
+    connected, _ = await comm.connect()
+    assert not connected
+
+
+async def test_the_run_list_rerenders_for_its_user_only():
+    alice, bob, run = await make_run(b"")
+    comm = communicator(RunListConsumer, "/ws/runs/", bob)
+    assert (await comm.connect())[0]
+    await get_channel_layer().group_send(
+        RUNS_GROUP, {"type": "runs.changed", "run_id": run.pk, "robot": "sim"}
+    )
+    html = await comm.receive_from(timeout=3)
+    assert 'id="run-tables"' in html and f"#{run.pk}" not in html
+    await comm.disconnect()
+
+
+async def test_robot_page_shows_svg_only_as_an_image():
+    alice, _, _ = await make_run(b"")
+    comm = communicator(RobotConsumer, "/ws/robots/sim/", alice, name="sim")
+    assert (await comm.connect())[0]
+    svg = '<svg xmlns="http://www.w3.org/2000/svg"><script>alert(1)</script></svg>'
+    event = {
+        "type": "robot.telemetry",
+        "robot": "sim",
+        "sensors": {"heading": 12.5, "position": {"x": 1.0}},
+        "units": {"heading": "deg"},
+        "shows": {"compass": {"value": svg, "run": 1}, "note": {"value": "<b>hi</b>", "run": 1}},
+    }
+    await get_channel_layer().group_send("robot-sim", event)
+    html = await comm.receive_from(timeout=3)
+    assert "<th>heading</th><td>12.5</td>" in html and "position.x" in html
+    assert "<script>" not in html and 'src="data:image/svg+xml;base64,' in html
+    assert "&lt;b&gt;hi&lt;/b&gt;" in html
+    await comm.disconnect()

@@ -1,0 +1,76 @@
+"""The robotide command: first start, second start, tokens."""
+
+import os
+import re
+import signal
+import subprocess
+
+import httpx
+
+from tests.appliance import ROBOTIDE, free_port, wait_for
+
+
+def start(data_dir, port, **env):
+    environ = {k: v for k, v in os.environ.items() if k not in ("REDIS_URL", "DATABASE_URL")}
+    environ.update(ROBOTIDE_DATA=str(data_dir), **env)
+    environ.pop("ROBOTIDE_ADMIN_PASSWORD", None) if "ROBOTIDE_ADMIN_PASSWORD" not in env else None
+    return subprocess.Popen(
+        [ROBOTIDE, "up", "--bind", f"127.0.0.1:{port}"],
+        env=environ, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+
+
+def serve_then_stop(data_dir, **env) -> str:
+    port = free_port()
+    proc = start(data_dir, port, **env)
+    try:
+        wait_for(lambda: httpx.get(f"http://127.0.0.1:{port}/accounts/login/").status_code == 200)
+        login = httpx.get(f"http://127.0.0.1:{port}/programs/")
+        assert login.status_code == 302
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        output, _ = proc.communicate(timeout=20)
+    assert proc.returncode == 0, output
+    return output
+
+
+def test_first_start_sets_up_everything_and_prints_the_password_once(tmp_path):
+    first = serve_then_stop(tmp_path)
+    password = re.search(r"password '([^']+)'", first).group(1)
+    assert "user 'admin'" in first and "serving on http://127.0.0.1:" in first
+    assert (tmp_path / "robotide.sqlite3").exists() and (tmp_path / "secret_key").exists()
+    assert oct((tmp_path / "secret_key").stat().st_mode)[-3:] == "600"
+    second = serve_then_stop(tmp_path)
+    assert "password" not in second
+    env = {**os.environ, "ROBOTIDE_DATA": str(tmp_path)}
+    env.pop("REDIS_URL", None)
+    env.pop("DATABASE_URL", None)
+    token = subprocess.run([ROBOTIDE, "token", "admin"], env=env, capture_output=True, text=True)
+    assert token.returncode == 0 and token.stdout.startswith("rt_")
+    check = subprocess.run(
+        [ROBOTIDE, "manage", "shell", "-c",
+         "from django.contrib.auth import authenticate;"
+         f"print(authenticate(username='admin', password={password!r}) is not None)"],
+        env=env, capture_output=True, text=True,
+    )  # fmt: skip
+    assert check.stdout.splitlines()[-1] == "True"
+
+
+def test_admin_password_from_the_environment(tmp_path):
+    output = serve_then_stop(tmp_path, ROBOTIDE_ADMIN_PASSWORD="from-env-pass-1")
+    assert "from-env-pass-1" not in output and "password" not in output
+
+
+def test_token_for_an_unknown_user_fails_clearly(tmp_path):
+    env = {**os.environ, "ROBOTIDE_DATA": str(tmp_path)}
+    env.pop("REDIS_URL", None)
+    env.pop("DATABASE_URL", None)
+    subprocess.run([ROBOTIDE, "manage", "migrate", "-v0"], env=env, check=True)
+    result = subprocess.run([ROBOTIDE, "token", "nobody"], env=env, capture_output=True, text=True)
+    assert result.returncode == 2 and "no user named 'nobody'" in result.stderr
+
+
+def test_bad_bind_is_refused(tmp_path):
+    proc = start(tmp_path, "x")
+    proc.wait(timeout=30)
+    assert proc.returncode != 0 and "HOST:PORT" in proc.stdout.read()
