@@ -180,8 +180,6 @@ class Run(models.Model):
 
 def start_run(program: Program, robot: Robot, user, args=()) -> Run:
     """Create the run and hand it to the robot's agent (which owns the process)."""
-    from robots.bus import tell_agent_sync  # the bus imports channels; keep models light
-
     language = program.lang
     if not language.available:
         raise RunRefused(
@@ -195,8 +193,22 @@ def start_run(program: Program, robot: Robot, user, args=()) -> Run:
         "filename": program.filename,
         "args": [str(a) for a in args],
     }
-    transaction.on_commit(lambda: tell_agent_sync(robot.name, "run.start", **message))
+    transaction.on_commit(lambda: _hand_to_agent(run, message))
     return run
+
+
+def _hand_to_agent(run: Run, message: dict) -> None:
+    from channels.exceptions import ChannelFull
+
+    from robots.bus import tell_agent_sync
+
+    try:
+        tell_agent_sync(run.robot.name, "run.start", **message)
+    except ChannelFull:
+        # Nobody has taken the robot's commands for a long while: say so instead of waiting.
+        reason = f"could not start: the agent of robot {run.robot.name!r} is not taking commands"
+        Run.mark_ended(run.pk, Run.State.FAILED, None, reason)
+        run.refresh_from_db()
 
 
 def request_stop(run: Run) -> None:

@@ -190,3 +190,28 @@ def test_the_examples_run(any_appliance):
     log = app.api("GET", f"/api/runs/{run['id']}/log").text
     distance = float(re.search(r"Stopped (\d\.\d+) m before the wall", log).group(1))
     assert 0.3 < distance <= 0.5
+
+
+def test_staff_add_a_robot_and_its_agent_starts(any_appliance):
+    app = any_appliance
+    name = f"sim{app.mode}"
+    body = {"name": name, "url": "sim://?arena=square", "settings": {"max_linear": 0.1}}
+    response = app.api("POST", "/api/robots", body)
+    assert response.status_code == 201, response.text
+    if app.mode == "split":  # fleet mode: the robot computer runs its own agent
+        app._spawn("agent", name)
+    sensors = wait_for(lambda: (r := app.api("GET", f"/api/robots/{name}/sensors")).status_code
+                       == 200 and r.json(), what="the new robot's agent")  # fmt: skip
+    assert sensors["heading"] == 0.0
+    program = app.create_program(
+        f"slow on {name}", "import robot\nprint(robot.Robot().drive(1, 0))\n"
+    )
+    run = app.wait_run(app.run_program(program["id"], robot=name)["id"])
+    log = app.api("GET", f"/api/runs/{run['id']}/log").text
+    assert "{'linear': 0.1, 'angular': 0.0}" in log  # the robot's own speed limit
+    assert app.api("POST", "/api/robots", body).status_code == 409
+
+
+def test_sensors_of_an_unknown_robot(any_appliance):
+    response = any_appliance.api("GET", "/api/robots/ghost/sensors")
+    assert response.status_code == 404 and "ghost" in response.json()["detail"]
