@@ -95,7 +95,7 @@ class RunProcess:
         self._log = open(self.log_path, "ab", buffering=1 << 20)  # noqa: SIM115
         self._written = self._log.tell()
         try:
-            self._transport, _ = await loop.subprocess_exec(
+            await loop.subprocess_exec(
                 lambda: _Protocol(self),
                 *self.argv,
                 stdin=DEVNULL,
@@ -108,7 +108,6 @@ class RunProcess:
         except OSError:
             self._log.close()
             raise
-        self.pid = self._transport.get_pid()
         return self.pid
 
     @property
@@ -255,6 +254,12 @@ def _live_lines(pending: list[tuple[int, bytes]]):
 class _Protocol(asyncio.SubprocessProtocol):
     def __init__(self, run: RunProcess):
         self.run = run
+
+    def connection_made(self, transport) -> None:
+        # Before any other callback: a program that exits at once may be reported as
+        # exited before subprocess_exec() has even returned.
+        self.run._transport = transport
+        self.run.pid = transport.get_pid()
 
     def pipe_data_received(self, fd: int, data: bytes) -> None:
         self.run._feed(fd, data)

@@ -260,3 +260,13 @@ async def wait_until(predicate, timeout=10.0):
         if time.monotonic() > deadline:
             pytest.fail("timed out")
         await asyncio.sleep(0.02)
+
+
+async def test_programs_that_end_at_once_are_always_seen_to_end(tmp_path):
+    """A program may exit before subprocess_exec() returns; its end must still be noticed."""
+    for i in range(40):
+        workdir = tmp_path / str(i)
+        workdir.mkdir()
+        process, _ = await run(workdir, "true\n", language=SHELL)
+        outcome = await asyncio.wait_for(process.wait(), 10)
+        assert outcome.state == "finished"
