@@ -6,6 +6,8 @@ prints the rate and the per-call latency; the figures are read from the run's lo
 
 Baselines, same run, same program file and client, launched from here with the launcher's
 environment against a Robot API server in a process of its own:
+- "canned reply": a bare asyncio.Protocol writing one fixed reply line per request line, no
+  JSON-RPC (the floor of a Python server doing a round trip per call on this machine);
 - "rpc only": robots.rpc.RobotApiServer answering every call with a fixed sensors dict
   (the JSON-RPC framing, socket and event loop costs alone);
 - "RobotApi + sim": the real robots.robot_api.RobotApi over a real sim:// driver, without the
@@ -74,7 +76,29 @@ def serve(mode: str, sample: str) -> None:
     from robots.robot_api import RobotApi
     from robots.rpc import RobotApiServer, RpcError
 
+    class Echo(asyncio.Protocol):
+        """No JSON-RPC at all: one canned reply line per request line."""
+
+        def __init__(self, reply: bytes):
+            self.reply, self.buffer = reply, b""
+
+        def connection_made(self, transport):
+            self.transport = transport
+
+        def data_received(self, data):
+            self.buffer += data
+            *lines, self.buffer = self.buffer.split(b"\n")
+            self.transport.write(self.reply * len(lines))
+
     async def main():
+        if mode == "echo":
+            loop = asyncio.get_running_loop()
+            reply = json.dumps({"jsonrpc": "2.0", "id": 0, "result": json.loads(sample)})
+            server = await loop.create_server(lambda: Echo(reply.encode() + b"\n"), "127.0.0.1", 0)
+            host, port = server.sockets[0].getsockname()[:2]
+            print(f"{host}:{port}", flush=True)
+            await loop.run_in_executor(None, sys.stdin.read)
+            return
         if mode == "rpc":
             fixed = json.loads(sample)
 
@@ -141,8 +165,12 @@ def latency_note(result: dict | None) -> str:
 
 
 def run() -> list[Figure]:
+    with tempfile.TemporaryDirectory(prefix="robotide-bench-api-") as work:
+        return measure(Path(work))
+
+
+def measure(work: Path) -> list[Figure]:
     figures: list[Figure] = []
-    work = Path(tempfile.mkdtemp(prefix="robotide-bench-api-"))
     file = work / "calls.py"
     file.write_text(PROGRAM)
     with appliance("api") as app:
@@ -155,7 +183,8 @@ def run() -> list[Figure]:
         through = parse(log)
         if through is None:
             say(f"[{BENCH}] the run ended {ended['state']} ({ended['reason']}):\n{log[-2000:]}")
-    say(f"[{BENCH}] baselines: rpc only, RobotApi + sim")
+    say(f"[{BENCH}] baselines: canned echo, rpc only, RobotApi + sim")
+    echo = baseline("echo", sample, file, work)
     rpc_only = baseline("rpc", sample, file, work)
     api_sim = baseline("api", sample, file, work)
 
@@ -175,6 +204,7 @@ def run() -> list[Figure]:
         figures.append(Figure(BENCH, "  latency per call, median", through["p50"] * 1e6, "us"))
         figures.append(Figure(BENCH, "  latency per call, p99", through["p99"] * 1e6, "us"))
     for label, result in (
+        ("baseline: canned reply per line, asyncio Protocol, no JSON-RPC", echo),
         ("baseline: rpc server only, fixed reply", rpc_only),
         ("baseline: RobotApi + sim driver, no web tier", api_sim),
     ):

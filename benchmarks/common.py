@@ -8,7 +8,6 @@ import shutil
 import sys
 import tempfile
 import threading
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -235,7 +234,3 @@ class RssSampler:
                 self.peak = max(self.peak, proc_status(self.pid)["VmRSS"])
                 self.samples += 1
             self._stop.wait(self.interval)
-
-
-def deadline_left(deadline: float) -> float:
-    return max(0.0, deadline - time.monotonic())

@@ -9,13 +9,16 @@ runs Python unbuffered), and shell `yes | head -n N` (large block writes). For e
 - live: a websocket client on the run (connected as soon as the run id is known) counts the
   lines it was shown and the "N line(s) not shown live" notes;
 - memory: the `robotide up` process's VmRSS is sampled during the flood (peak), VmHWM after;
-  and its CPU time for the flood.
+  and its CPU time for the flood;
+- late viewer: a websocket opened on the run once it has ended (a page reload): time to its
+  first message (the log tail) and the server's RSS growth meanwhile.
 
 Baseline, same run: the same program file and interpreter, launched from this process with the
 launcher's environment, its stdout a pipe read here in 64 KB chunks (the producer's own speed).
 
 Targets: >= 200,000 lines/s captured, none lost; server memory bounded (peak growth over the
-pre-flood RSS <= 32 MB, while the log of the Python flood alone is ~20 MB).
+pre-flood RSS <= 32 MB, while the log of the Python flood alone is ~20 MB; the same for the
+late viewer).
 """
 
 import os
@@ -188,7 +191,9 @@ def appliance_flood(app, http, cookie: str, program_id: int) -> dict:
     out = b"".join(line + b"\n" for line in data.split(b"\n") if line.startswith(b"o "))
     err = [line[2:].decode() for line in data.split(b"\n") if line.startswith(b"e ")]
     sys_lines = [line[2:].decode() for line in data.split(b"\n") if line.startswith(b"s ")]
+    late = late_viewer(app, run_id, cookie)
     return {
+        "late": late,
         "run": run,
         "first": poller.first and poller.first - t0,
         "done": poller.done and poller.done - t0,
@@ -203,6 +208,23 @@ def appliance_flood(app, http, cookie: str, program_id: int) -> dict:
         "cpu": cpu_after - cpu_before,
         "live": live,
     }
+
+
+def late_viewer(app, run_id: int, cookie: str) -> dict:
+    """The run's websocket opened once it has ended: the whole log is behind it."""
+    pid = server_pid(app)
+    before = proc_status(pid)["VmRSS"]
+    first = None
+    with RssSampler(pid, interval=0.005) as sampler:
+        t0 = time.perf_counter()
+        try:
+            with ws_connect(app, f"/ws/runs/{run_id}/", cookie, timeout=RUN_TIMEOUT) as ws:
+                ws.recv(timeout=RUN_TIMEOUT)
+                first = time.perf_counter() - t0
+        except Exception as exc:
+            say(f"[{BENCH}] late viewer: {exc!r}")
+        time.sleep(0.2)
+    return {"first": first, "growth": max(0, sampler.peak - before), "before": before}
 
 
 def wait_ended(http, run_id: int) -> dict:
@@ -223,8 +245,12 @@ def producer_rate(stderr: str) -> float | None:
 
 
 def run() -> list[Figure]:
+    with tempfile.TemporaryDirectory(prefix="robotide-bench-flood-") as work:
+        return measure(Path(work))
+
+
+def measure(work: Path) -> list[Figure]:
     figures: list[Figure] = []
-    work = Path(tempfile.mkdtemp(prefix="robotide-bench-flood-"))
     with appliance("throughput") as app:
         http = api_client(app)
         cookie = session_cookie(app)
@@ -323,11 +349,31 @@ def flood_figures(name: str, bare: dict, flood: dict) -> list[Figure]:
             growth <= MEMORY_GROWTH_BOUND,
             f"RSS before {flood['rss_before'] / MB:.1f} MB, peak"
             f" {flood['rss_peak'] / MB:.1f} MB, 1 s after {flood['rss_after'] / MB:.1f}"
-            f" MB, VmHWM {flood['hwm'] / MB:.1f} MB",
+            f" MB, VmHWM (lifetime) {flood['hwm'] / MB:.1f} MB",
         )
     )
     figures.append(
         Figure(BENCH, f"{name}: server CPU per million lines", flood["cpu"] / N * 1e6, "s")
+    )
+    late = flood["late"]
+    figures.append(
+        Figure(
+            BENCH,
+            f"{name}: late viewer, websocket opened -> log tail shown",
+            None if late["first"] is None else late["first"] * 1000,
+            "ms",
+            note="a websocket opened on the run after it ended (e.g. a page reload)",
+        )
+    )
+    figures.append(
+        Figure(
+            BENCH,
+            f"{name}: late viewer, server peak RSS growth",
+            late["growth"] / MB,
+            "MB",
+            f"<= {MEMORY_GROWTH_BOUND // MB} MB",
+            late["growth"] <= MEMORY_GROWTH_BOUND,
+        )
     )
     return figures
 

@@ -11,7 +11,6 @@ from playwright.sync_api import Page, expect
 from tests.appliance import ADMIN_PASSWORD
 
 EXAMPLES = ["Compass", "Drive a square", "Stop before the wall", "Hello from the shell"]
-FINAL_STATES = ("finished", "failed", "stopped", "lost")
 
 GREETER = """\
 import sys
@@ -48,14 +47,21 @@ def page(new_page) -> Page:
     return page
 
 
+def active_runs(appliance) -> list[int]:
+    states = ("starting", "running")
+    return [r["id"] for s in states for r in appliance.api("GET", f"/api/runs?state={s}").json()]
+
+
 @pytest.fixture(autouse=True)
 def _no_runs_left(appliance):
     """A failed test leaves no never-ending program behind to confuse the next one."""
+    before = set(active_runs(appliance))
     yield
-    for state in ("starting", "running"):
-        for run in appliance.api("GET", f"/api/runs?state={state}").json():
-            appliance.api("POST", f"/api/runs/{run['id']}/stop")
-            appliance.wait_run(run["id"])
+    left = [run_id for run_id in active_runs(appliance) if run_id not in before]
+    for run_id in left:
+        appliance.api("POST", f"/api/runs/{run_id}/stop")
+    for run_id in left:
+        appliance.wait_run(run_id)
 
 
 def editor_text(page: Page) -> str:
