@@ -9,7 +9,7 @@ from django.template.loader import render_to_string
 from django.utils.html import escape
 
 from programs.access import get_run_for_user
-from programs.runlog import render_lines, tail
+from programs.runlog import count_lines_between, render_lines, tail
 from programs.views import run_tables_context
 from robots.bus import RUNS_GROUP, run_group
 
@@ -51,10 +51,17 @@ class RunConsumer(AsyncWebsocketConsumer):
             await self.channel_layer.group_discard(self.group, self.channel_name)
 
     async def run_output(self, event):
-        lines = [(tag, text) for offset, tag, text in event["lines"] if offset >= self.offset]
-        if not lines:
+        fresh = [line for line in event["lines"] if line[0] >= self.offset]
+        if not fresh:
             return
-        head = skipped_line(event["skipped"]) if event["skipped"] else ""
+        skipped = event.get("skipped", 0)
+        if skipped and event["skipped_from"] < self.offset:
+            # Part of the gap was in the log tail this viewer got first: count what it missed.
+            skipped = await asyncio.to_thread(
+                count_lines_between, self.run.log_path, self.offset, fresh[0][0]
+            )
+        head = skipped_line(skipped) if skipped else ""
+        lines = [(tag, text) for _, tag, text in fresh]
         await self.send(
             f'<div id="log-lines" hx-swap-oob="beforeend">{head}{render_lines(lines)}</div>'
         )

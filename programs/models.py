@@ -131,6 +131,11 @@ class Run(models.Model):
         return (self.ended or timezone.now()) - self.started
 
     @property
+    def reason_note(self) -> str:
+        """How the run ended, unless the exit code shown beside it says it all."""
+        return "" if self.reason == f"exit status {self.exit_code}" else self.reason
+
+    @property
     def log_filename(self) -> str:
         return f"{slugify(self.program_name) or 'program'}-run{self.pk}.log"
 

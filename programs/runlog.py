@@ -1,37 +1,62 @@
 """Reading a run's log file: tagged lines written by programs.supervisor."""
 
 import asyncio
-from collections import deque
-from collections.abc import AsyncIterator, Iterator
+import os
+from collections.abc import AsyncIterator
 from pathlib import Path
 
 from django.utils.html import escape
 
 TAIL_LINES = 2000
 DOWNLOAD_CHUNK = 256 * 1024
-
-
-def read_complete(path: Path) -> tuple[bytes, int]:
-    """The log up to its last complete line, and that length (where the live stream goes on)."""
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        return b"", 0
-    end = data.rfind(b"\n") + 1
-    return data[:end], end
-
-
-def tagged_lines(data: bytes) -> Iterator[tuple[str, str]]:
-    for line in data.split(b"\n")[:-1]:
-        yield chr(line[0]) if line else "o", line[2:].decode("utf-8", "replace")
+BLOCK = 256 * 1024
 
 
 def tail(path: Path, limit: int = TAIL_LINES) -> tuple[list[tuple[str, str]], int, int]:
-    """(last `limit` lines, how many earlier lines were left out, offset after the last line)."""
-    data, end = read_complete(path)
-    lines = deque(tagged_lines(data), maxlen=limit)
-    total = data.count(b"\n")
-    return list(lines), total - len(lines), end
+    """(last `limit` complete lines, how many earlier lines were left out, offset after the last).
+
+    Reads backwards from the end, so a big log costs a bounded amount of memory.
+    """
+    try:
+        f = open(path, "rb")  # noqa: SIM115
+    except FileNotFoundError:
+        return [], 0, 0
+    with f:
+        size = f.seek(0, os.SEEK_END)
+        start, data = size, b""
+        while start > 0 and data.count(b"\n") <= limit:
+            step = min(BLOCK, start)
+            start -= step
+            f.seek(start)
+            data = f.read(step) + data
+        end = start + data.rfind(b"\n") + 1  # the stream goes on from the last complete line
+        data = data[: end - start]
+        if start > 0:  # the first piece read may begin inside a line
+            cut = data.find(b"\n") + 1
+            data, start = data[cut:], start + cut
+        lines = data.split(b"\n")[:-1]
+        kept = lines[-limit:]
+        earlier = len(lines) - len(kept) + count_lines(f, start)
+    return [_tagged(line) for line in kept], earlier, max(end, 0)
+
+
+def count_lines_between(path: Path, start: int, end: int) -> int:
+    with open(path, "rb") as f:
+        return count_lines(f, end, start)
+
+
+def count_lines(f, end: int, start: int = 0) -> int:
+    f.seek(start)
+    count, left = 0, end - start
+    while left > 0:
+        chunk = f.read(min(BLOCK, left))
+        count += chunk.count(b"\n")
+        left -= len(chunk)
+    return count
+
+
+def _tagged(line: bytes) -> tuple[str, str]:
+    return (chr(line[0]) if line else "o"), line[2:].decode("utf-8", "replace")
 
 
 async def plain_text(path: Path, streams: str = "oes") -> AsyncIterator[bytes]:

@@ -25,7 +25,9 @@ LIVE_MAX_LINES = 1000
 
 # (offset of the line in the log file, tag "o"|"e"|"s", text)
 LiveLine = tuple[int, str, str]
-OutputCallback = Callable[[list[LiveLine], int], None]
+# on_output(lines, skipped, skipped_from): `skipped` lines not sent live lie between offset
+# `skipped_from` (where the previous batch ended) and the first of `lines`.
+OutputCallback = Callable[[list[LiveLine], int, int], None]
 
 SIGNAL_REASONS = {
     signal.SIGXCPU: "CPU time limit reached",
@@ -80,6 +82,7 @@ class RunProcess:
         self._pending: list[tuple[int, bytes]] = []
         self._pending_bytes = 0
         self._skipped = 0
+        self._live_end = 0
         self._flush_handle: asyncio.Handle | None = None
         self._last_flush = 0.0
         self._kill_handle: asyncio.TimerHandle | None = None
@@ -197,14 +200,16 @@ class RunProcess:
         if self._log.closed:
             return
         self._log.flush()
-        pending, skipped = self._pending, self._skipped
+        pending, skipped, skipped_from = self._pending, self._skipped, self._live_end
         self._pending, self._pending_bytes, self._skipped = [], 0, 0
+        if pending:
+            self._live_end = pending[-1][0] + len(pending[-1][1])
         lines = list(_live_lines(pending))
         if len(lines) > LIVE_MAX_LINES:
             skipped += len(lines) - LIVE_MAX_LINES
             lines = lines[-LIVE_MAX_LINES:]
         if lines or skipped:
-            self.on_output(lines, skipped)
+            self.on_output(lines, skipped, skipped_from)
 
     # -- process --------------------------------------------------------------------------
 

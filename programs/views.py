@@ -22,8 +22,8 @@ def program_list(request: HttpRequest) -> HttpResponse:
         "programs/list.html",
         {
             "programs": programs_for_user(request.user),
-            "new_form": NewProgramForm(owner=request.user),
-            "upload_form": UploadForm(owner=request.user),
+            "new_form": NewProgramForm(owner=request.user, auto_id="new_%s"),
+            "upload_form": UploadForm(owner=request.user, auto_id="upload_%s"),
             "robots": Robot.objects.all(),
         },
     )
@@ -32,7 +32,7 @@ def program_list(request: HttpRequest) -> HttpResponse:
 @login_required
 @require_POST
 def program_create(request: HttpRequest) -> HttpResponse:
-    form = NewProgramForm(request.POST, owner=request.user)
+    form = NewProgramForm(request.POST, owner=request.user, auto_id="new_%s")
     if not form.is_valid():
         return _list_with_errors(request, new_form=form)
     language = get_language(form.cleaned_data["language"])
@@ -46,7 +46,7 @@ def program_create(request: HttpRequest) -> HttpResponse:
 @login_required
 @require_POST
 def program_upload(request: HttpRequest) -> HttpResponse:
-    form = UploadForm(request.POST, request.FILES, owner=request.user)
+    form = UploadForm(request.POST, request.FILES, owner=request.user, auto_id="upload_%s")
     if not form.is_valid():
         return _list_with_errors(request, upload_form=form)
     data = form.cleaned_data
@@ -61,8 +61,8 @@ def program_upload(request: HttpRequest) -> HttpResponse:
 def _list_with_errors(request, **forms) -> HttpResponse:
     context = {
         "programs": programs_for_user(request.user),
-        "new_form": NewProgramForm(owner=request.user),
-        "upload_form": UploadForm(owner=request.user),
+        "new_form": NewProgramForm(owner=request.user, auto_id="new_%s"),
+        "upload_form": UploadForm(owner=request.user, auto_id="upload_%s"),
         "robots": Robot.objects.all(),
         **forms,
     }

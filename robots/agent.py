@@ -223,11 +223,11 @@ class RobotAgent:
         """Queue a group event; one task sends them in order (a layer may reorder tasks)."""
         self._outbox.put_nowait((group, message))
 
-    def _publish_output(self, run_id: int, lines: list, skipped: int) -> None:
-        self.publish(
-            run_group(run_id),
-            {"type": "run.output", "run_id": run_id, "lines": lines, "skipped": skipped},
-        )
+    def _publish_output(self, run_id: int, lines: list, skipped: int, skipped_from: int) -> None:
+        message = {"type": "run.output", "run_id": run_id, "lines": lines}
+        if skipped:
+            message.update(skipped=skipped, skipped_from=skipped_from)
+        self.publish(run_group(run_id), message)
 
     def _run_changed(self, run_id: int) -> None:
         self.publish(run_group(run_id), {"type": "run.state", "run_id": run_id})

@@ -13,7 +13,7 @@ bot = robot.Robot()
 
 def compass_svg(heading):
     angle = math.radians(heading)
-    x, y = 50 + 36 * math.sin(angle), 50 - 36 * math.cos(angle)
+    x, y = 50 + 26 * math.sin(angle), 50 - 26 * math.cos(angle)
     return (
         '<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 100 100" width="160" height="160">'
         '<circle cx="50" cy="50" r="45" fill="#fff" stroke="#334" stroke-width="3"/>'

@@ -101,3 +101,22 @@ async def test_robot_page_shows_svg_only_as_an_image():
     assert "<script>" not in html and 'src="data:image/svg+xml;base64,' in html
     assert "&lt;b&gt;hi&lt;/b&gt;" in html
     await comm.disconnect()
+
+
+async def test_a_late_viewer_is_told_exactly_how_many_lines_it_missed():
+    log = b"".join(f"o {i}\n".encode() for i in range(10))
+    alice, _, run = await make_run(log)
+    comm = communicator(RunConsumer, f"/ws/runs/{run.pk}/", alice, run_id=run.pk)
+    assert (await comm.connect())[0]
+    await comm.receive_from()  # the tail: lines 0-9
+    await comm.receive_from()  # the state
+    with open(run.log_path, "ab") as f:  # lines 10-14 go by unseen, 15 comes live
+        f.write(b"".join(f"o {i}\n".encode() for i in range(10, 16)))
+    offsets = [len(log) + sum(len(f"o {j}\n") for j in range(10, i)) for i in range(10, 16)]
+    # The agent skipped lines 3-14 since its previous batch (which ended after line 2).
+    event = {"type": "run.output", "run_id": run.pk, "lines": [[offsets[-1], "o", "15"]],
+             "skipped": 12, "skipped_from": 12}  # fmt: skip
+    await get_channel_layer().group_send(run_group(run.pk), event)
+    html = await comm.receive_from()
+    assert "… 5 line(s) not shown live" in html and '<div class="ln o">15</div>' in html
+    await comm.disconnect()
