@@ -8,6 +8,7 @@ Baselines, same run, same program file and client, launched from here with the l
 environment against a Robot API server in a process of its own:
 - "canned reply": a bare asyncio.Protocol writing one fixed reply line per request line, no
   JSON-RPC (the floor of a Python server doing a round trip per call on this machine);
+  all baselines listen on a Unix socket, as the appliance's Robot API does for programs;
 - "rpc only": robots.rpc.RobotApiServer answering every call with a fixed sensors dict
   (the JSON-RPC framing, socket and event loop costs alone);
 - "RobotApi + sim": the real robots.robot_api.RobotApi over a real sim:// driver, without the
@@ -94,9 +95,9 @@ def serve(mode: str, sample: str) -> None:
         if mode == "echo":
             loop = asyncio.get_running_loop()
             reply = json.dumps({"jsonrpc": "2.0", "id": 0, "result": json.loads(sample)})
-            server = await loop.create_server(lambda: Echo(reply.encode() + b"\n"), "127.0.0.1", 0)
-            host, port = server.sockets[0].getsockname()[:2]
-            print(f"{host}:{port}", flush=True)
+            path = Path(tempfile.mkdtemp(prefix="bench-")) / "api.sock"
+            await loop.create_unix_server(lambda: Echo(reply.encode() + b"\n"), str(path))
+            print(f"unix:{path}", flush=True)
             await loop.run_in_executor(None, sys.stdin.read)
             return
         if mode == "rpc":
@@ -116,8 +117,10 @@ def serve(mode: str, sample: str) -> None:
             active = SimpleNamespace(run_id=0, token=TOKEN, drove=False)
             agent = SimpleNamespace(name="bench", tokens={TOKEN: active}, shows={}, driver=driver)
             handler = RobotApi(agent).handle
-        server = RobotApiServer(handler)
-        print(await server.start(), flush=True)
+        # The same transport as the appliance gives programs: a Unix socket.
+        server = RobotApiServer(handler, unix_path=Path(tempfile.mkdtemp(prefix="bench-")) / "s")
+        await server.start()
+        print(server.url, flush=True)
         await asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)  # until EOF
 
     asyncio.run(main())

@@ -11,8 +11,11 @@ import contextlib
 import itertools
 import logging
 import secrets
+import shutil
+import tempfile
 from dataclasses import dataclass, field
 from functools import partial
+from pathlib import Path
 
 from channels.db import database_sync_to_async
 from channels.layers import get_channel_layer
@@ -57,7 +60,9 @@ class RobotAgent:
         self.layer = get_channel_layer()
         self.driver: rhal.Robot | None = None
         self.api = RobotApi(self)
-        self.server = rpc.RobotApiServer(self.api.handle)
+        # A short private folder: Unix socket paths are limited to 107 bytes.
+        self.socket_dir = Path(tempfile.mkdtemp(prefix="robotide-"))
+        self.server = rpc.RobotApiServer(self.api.handle, unix_path=self.socket_dir / "api.sock")
         self.ready = asyncio.Event()
         self._outbox: asyncio.Queue = asyncio.Queue()
         self._tasks: list[asyncio.Task] = []
@@ -96,6 +101,7 @@ class RobotAgent:
         if watchers:
             await asyncio.wait(watchers, timeout=settings.RUN_DEFAULTS["stop_grace_seconds"] + 2)
         await self.server.close()
+        shutil.rmtree(self.socket_dir, ignore_errors=True)
         if self.driver is not None:
             with contextlib.suppress(Exception):
                 await self.driver.stop()
@@ -169,7 +175,8 @@ class RobotAgent:
             language,
             workdir,
             {
-                "ROBOT_API": self.api_address,
+                "ROBOT_API": self.server.url,
+                "ROBOT_API_TCP": self.api_address,
                 "ROBOT_TOKEN": token,
                 "ROBOT_NAME": self.name,
                 "ROBOT_RUN_ID": str(run_id),
@@ -184,10 +191,16 @@ class RobotAgent:
             max_log_bytes=int(self.limits["log_size_mb"]) * 1024 * 1024,
             grace=float(self.limits["stop_grace_seconds"]),
         )
-        await process.start()
+        # The token is good before the program starts: it may call auth at once.
         active = ActiveRun(run_id, token, process)
         self.runs[run_id] = active
         self.tokens[token] = active
+        try:
+            await process.start()
+        except BaseException:
+            self.runs.pop(run_id, None)
+            self.tokens.pop(token, None)
+            raise
         active.watcher = asyncio.create_task(self._watch(active))
         return active
 

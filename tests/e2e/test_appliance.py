@@ -215,3 +215,11 @@ def test_staff_add_a_robot_and_its_agent_starts(any_appliance):
 def test_sensors_of_an_unknown_robot(any_appliance):
     response = any_appliance.api("GET", "/api/robots/ghost/sensors")
     assert response.status_code == 404 and "ghost" in response.json()["detail"]
+
+
+def test_a_program_may_call_the_robot_api_the_moment_it_starts(any_appliance):
+    app = any_appliance
+    program = app.create_program("eager", "import robot\nrobot.Robot().sensors()\n")
+    runs = [app.run_program(program["id"])["id"] for _ in range(12)]
+    states = [app.wait_run(run_id)["state"] for run_id in runs]
+    assert states == ["finished"] * len(runs)

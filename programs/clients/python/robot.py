@@ -14,6 +14,8 @@ import socket
 
 __all__ = ["Robot", "RobotError"]
 
+_encode = json.JSONEncoder(separators=(",", ":")).encode
+
 
 class RobotError(Exception):
     """An error the robot reported, e.g. a sensor it does not have."""
@@ -26,15 +28,19 @@ class RobotError(Exception):
 
 class Robot:
     def __init__(self, address=None, token=None):
-        address = address or os.environ.get("ROBOT_API")
+        address = address or os.environ.get("ROBOT_API")  # unix:/path or host:port
         token = token or os.environ.get("ROBOT_TOKEN")
         if not address or not token:
             raise RobotError(
                 "ROBOT_API and ROBOT_TOKEN are not set: run this program from robotide"
             )
-        host, _, port = address.rpartition(":")
-        self._sock = socket.create_connection((host or "127.0.0.1", int(port)))
-        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        if address.startswith("unix:"):
+            self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            self._sock.connect(address[len("unix:") :])
+        else:
+            host, _, port = address.rpartition(":")
+            self._sock = socket.create_connection((host or "127.0.0.1", int(port)))
+            self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._file = self._sock.makefile("rb")
         self._next_id = 0
         self.call("auth", token)
@@ -42,7 +48,7 @@ class Robot:
     def call(self, method, *params):
         self._next_id += 1
         request = {"jsonrpc": "2.0", "id": self._next_id, "method": method, "params": list(params)}
-        self._sock.sendall(json.dumps(request, separators=(",", ":")).encode() + b"\n")
+        self._sock.sendall(_encode(request).encode() + b"\n")
         line = self._file.readline()
         if not line:
             raise RobotError("the robot closed the connection (the run has ended?)")

@@ -1,0 +1,79 @@
+"""The JSON-RPC server on its own: handlers that answer at once and handlers that wait."""
+
+import asyncio
+import json
+
+import pytest
+
+from robots.rpc import RobotApiServer, RpcError
+
+
+async def handler(session, method, params):
+    if method == "wait":
+        await asyncio.sleep(params[0])
+        return f"waited {params[0]}"
+    if method == "echo":
+        return params
+    if method == "fail":
+        raise RpcError(-32000, "no")
+    if method == "crash":
+        raise RuntimeError("bug")
+    if method == "yield":
+        await asyncio.sleep(0)
+        return "after a bare yield"
+    raise RpcError(-32601, "no such method")
+
+
+@pytest.fixture
+async def server():
+    server = RobotApiServer(handler)
+    await server.start()
+    yield server
+    await server.close()
+
+
+async def open_client(server):
+    host, port = server.address.rsplit(":", 1)
+    return await asyncio.open_connection(host, int(port))
+
+
+def request(i, method, *params):
+    return json.dumps({"jsonrpc": "2.0", "id": i, "method": method, "params": list(params)})
+
+
+async def test_pipelined_requests_are_answered_in_order(server):
+    reader, writer = await open_client(server)
+    calls = [("wait", 0.05), ("echo", 1), ("yield",), ("wait", 0.01), ("echo", 2), ("fail",)]
+    writer.write("".join(request(i, *c) + "\n" for i, c in enumerate(calls)).encode())
+    replies = [json.loads(await reader.readline()) for _ in calls]
+    assert [r["id"] for r in replies] == list(range(len(calls)))
+    assert replies[0]["result"] == "waited 0.05" and replies[1]["result"] == [1]
+    assert replies[2]["result"] == "after a bare yield" and replies[5]["error"]["code"] == -32000
+    writer.close()
+
+
+async def test_a_crashing_handler_is_an_internal_error_and_the_connection_goes_on(server):
+    reader, writer = await open_client(server)
+    writer.write((request(1, "crash") + "\n" + request(2, "echo", "still here") + "\n").encode())
+    first, second = json.loads(await reader.readline()), json.loads(await reader.readline())
+    assert first["error"]["code"] == -32603 and second["result"] == ["still here"]
+    writer.close()
+
+
+async def test_requests_split_across_packets(server):
+    reader, writer = await open_client(server)
+    line = (request(5, "echo", "x" * 10_000) + "\n").encode()
+    for i in range(0, len(line), 333):
+        writer.write(line[i : i + 333])
+        await writer.drain()
+        await asyncio.sleep(0)
+    assert json.loads(await reader.readline())["result"] == ["x" * 10_000]
+    writer.close()
+
+
+async def test_closing_the_server_while_a_handler_waits(server):
+    reader, writer = await open_client(server)
+    writer.write((request(1, "wait", 10) + "\n").encode())
+    await asyncio.sleep(0.05)
+    await asyncio.wait_for(server.close(), 5)
+    assert await reader.read() == b""
