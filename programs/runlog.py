@@ -1,8 +1,7 @@
 """Reading a run's log file: tagged lines written by programs.supervisor."""
 
-import asyncio
 import os
-from collections.abc import AsyncIterator
+from collections.abc import Iterator
 from pathlib import Path
 
 from django.utils.html import escape
@@ -59,11 +58,11 @@ def _tagged(line: bytes) -> tuple[str, str]:
     return (chr(line[0]) if line else "o"), line[2:].decode("utf-8", "replace")
 
 
-async def plain_text(path: Path, streams: str = "oes") -> AsyncIterator[bytes]:
-    """The log as the program printed it (tags removed), read in a thread chunk by chunk."""
+def plain_text(path: Path, streams: str = "oes") -> Iterator[bytes]:
+    """The log as the program printed it (tags removed), chunk by chunk, for a download."""
     wanted = tuple(tag.encode() for tag in streams)
     with open(path, "rb") as f:
-        while lines := await asyncio.to_thread(f.readlines, DOWNLOAD_CHUNK):
+        while lines := f.readlines(DOWNLOAD_CHUNK):
             yield b"".join(line[2:] for line in lines if line.startswith(wanted))
 
 

@@ -94,6 +94,7 @@ def ensure_sim_robot() -> None:
 async def serve(host: str, port: int, with_agents: bool) -> None:
     import uvicorn
 
+    from robots import bus
     from robots.agent import AgentManager
 
     config = uvicorn.Config(
@@ -106,6 +107,7 @@ async def serve(host: str, port: int, with_agents: bool) -> None:
         access_log=False,
     )
     server = _Server(config)
+    bus.serve_on(asyncio.get_running_loop())
     manager = AgentManager() if with_agents else None
     if manager is not None:
         await manager.start()

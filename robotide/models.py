@@ -1,9 +1,12 @@
 import hashlib
 import secrets
+from datetime import timedelta
 
 from django.conf import settings
 from django.db import models
 from django.utils import timezone
+
+LAST_USED_RESOLUTION = timedelta(minutes=1)
 
 
 def hash_token(token: str) -> str:
@@ -34,5 +37,7 @@ class ApiToken(models.Model):
         found = cls.objects.select_related("user").filter(digest=hash_token(token)).first()
         if found is None or not found.user.is_active:
             return None
-        cls.objects.filter(pk=found.pk).update(last_used=timezone.now())
+        now = timezone.now()
+        if found.last_used is None or now - found.last_used > LAST_USED_RESOLUTION:
+            cls.objects.filter(pk=found.pk).update(last_used=now)  # not a write per request
         return found.user

@@ -5,6 +5,7 @@ fresh reply channel). Agent -> browsers: group events that consumers turn into H
 """
 
 import asyncio
+import threading
 
 from asgiref.sync import async_to_sync
 from channels.layers import get_channel_layer
@@ -46,6 +47,29 @@ async def announce_robot(robot_name: str) -> None:
     await get_channel_layer().send(MANAGER_CHANNEL, {"type": "robot.added", "name": robot_name})
 
 
-tell_agent_sync = async_to_sync(send_to_agent)
-ask_agent_sync = async_to_sync(ask_agent)
-announce_robot_sync = async_to_sync(announce_robot)
+# -- from sync code (views in the web server's worker threads) -------------------------------
+
+_server_loop: asyncio.AbstractEventLoop | None = None
+
+
+def serve_on(loop: asyncio.AbstractEventLoop) -> None:
+    """Tell the bus which loop the web server runs: the in-memory layer lives on it."""
+    global _server_loop
+    _server_loop = loop
+
+
+def _blocking(coro_fn):
+    def call(*args, **kwargs):
+        loop = _server_loop
+        if loop is None or not loop.is_running():
+            return async_to_sync(coro_fn)(*args, **kwargs)
+        if threading.get_ident() == getattr(loop, "_thread_id", None):
+            raise RuntimeError("blocking bus call from the event loop's own thread")
+        return asyncio.run_coroutine_threadsafe(coro_fn(*args, **kwargs), loop).result()
+
+    return call
+
+
+tell_agent_sync = _blocking(send_to_agent)
+ask_agent_sync = _blocking(ask_agent)
+announce_robot_sync = _blocking(announce_robot)

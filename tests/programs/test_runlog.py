@@ -33,10 +33,10 @@ def test_tail_decodes_bad_utf8_and_keeps_empty_lines(tmp_path):
     assert runlog.tail(path)[0] == [("o", "\ufffd\ufffd"), ("o", ""), ("e", "x")]
 
 
-async def test_plain_text_strips_tags_and_filters_streams(tmp_path, monkeypatch):
+def test_plain_text_strips_tags_and_filters_streams(tmp_path, monkeypatch):
     monkeypatch.setattr(runlog, "DOWNLOAD_CHUNK", 8)
     path = write(tmp_path, [b"o out", b"e err", b"s [robotide] finished", b"o again"])
-    everything = b"".join([chunk async for chunk in runlog.plain_text(path)])
+    everything = b"".join(runlog.plain_text(path))
     assert everything == b"out\nerr\n[robotide] finished\nagain\n"
-    stderr = b"".join([chunk async for chunk in runlog.plain_text(path, "e")])
+    stderr = b"".join(runlog.plain_text(path, "e"))
     assert stderr == b"err\n"
