@@ -101,7 +101,11 @@ class Robot(abc.ABC):
         return readings[name]
 
     def capabilities(self) -> dict[str, Any]:
-        """What this robot can do, as a JSON-serialisable dict."""
+        """What this robot can do, as a JSON-serialisable dict.
+
+        Each sensor's ``unit`` is a text, or for a reading made of named parts (position) a
+        dict of part -> unit.
+        """
         return {
             "kind": self.kind,
             "drive": {"max_linear": self.max_linear, "max_angular": self.max_angular},

@@ -99,9 +99,9 @@ class SimRobot(Robot):
         return {
             "heading": {"unit": "deg"},
             "range": {"unit": "m", "max": MAX_RANGE},
-            "position": {"unit": "m, rad"},
-            "velocity": {"unit": "m/s, rad/s"},
-            "odometry": {"unit": "m"},
+            "position": {"unit": {"x": "m", "y": "m", "theta": "rad"}},
+            "velocity": {"unit": {"linear": "m/s", "angular": "rad/s"}},
+            "odometry": {"unit": {"distance": "m"}},
             "bumper": {"unit": "bool"},
             "battery": {"unit": "%"},
             "time": {"unit": "s"},

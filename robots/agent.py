@@ -260,7 +260,7 @@ class RobotAgent:
         last_heartbeat = 0.0
         loop = asyncio.get_running_loop()
         specs = self.driver.capabilities().get("sensors", {})
-        units = {name: spec.get("unit", "") for name, spec in specs.items()}
+        units = flat_units(specs)
         for tick in itertools.count():
             try:
                 sensors = await self.driver.sensors()
@@ -287,6 +287,18 @@ class RobotAgent:
                 except Exception:  # the database away for a moment must not stop the robot
                     log.exception("agent %s: heartbeat failed", self.name)
             await asyncio.sleep(TELEMETRY_INTERVAL)
+
+
+def flat_units(specs: dict) -> dict[str, str]:
+    """{"position": {"unit": {"x": "m"}}} -> {"position.x": "m"}, as the page names readings."""
+    units = {}
+    for name, spec in specs.items():
+        unit = spec.get("unit", "")
+        if isinstance(unit, dict):
+            units.update({f"{name}.{part}": value for part, value in unit.items()})
+        else:
+            units[name] = unit
+    return units
 
 
 class AgentManager:

@@ -27,7 +27,7 @@ bot.drive(0.0, 0.4)  # turn slowly, so the needle moves
 for _ in range(30):
     heading = bot.sensors()["heading"]
     print(f"My heading is {heading:.0f} degrees")
-    bot.show("heading", round(heading))
+    bot.show("heading", round(heading) % 360)
     bot.show("compass", compass_svg(heading))
     time.sleep(1)
 bot.stop()

@@ -2,6 +2,7 @@
 
 import asyncio
 import json
+import shutil
 import sys
 
 import pytest
@@ -23,6 +24,7 @@ async def agent():
     yield agent
     await agent.server.close()
     await agent.driver.close()
+    shutil.rmtree(agent.socket_dir)
 
 
 def admit(agent, token="good-token", run_id=7) -> ActiveRun:
@@ -177,6 +179,22 @@ async def test_the_python_client_round_trip(agent):
     assert error[0] == -32000 and "gps" in error[1]
 
 
+async def test_the_python_client_over_the_unix_socket(agent):
+    admit(agent)
+    assert agent.server.url.startswith("unix:")
+    bot = await asyncio.to_thread(robot_client.Robot, agent.server.url, "good-token")
+    assert (await asyncio.to_thread(bot.sensors))["range"] == 2.0
+    bot.close()
+
+
 async def test_the_python_client_refuses_a_wrong_token(agent):
     with pytest.raises(robot_client.RobotError, match="invalid token"):
         await asyncio.to_thread(robot_client.Robot, agent.api_address, "nope")
+
+
+async def test_units_are_named_as_the_page_names_readings(agent):
+    from robots.agent import flat_units
+
+    units = flat_units(agent.driver.capabilities()["sensors"])
+    assert units["heading"] == "deg" and units["position.x"] == "m"
+    assert units["position.theta"] == "rad" and units["velocity.angular"] == "rad/s"
