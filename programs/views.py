@@ -2,6 +2,7 @@ import difflib
 
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
+from django.core.exceptions import ValidationError
 from django.http import HttpRequest, HttpResponse, StreamingHttpResponse
 from django.shortcuts import get_object_or_404, redirect, render
 from django.utils.http import url_has_allowed_host_and_scheme
@@ -96,24 +97,29 @@ def _save_and_act(request, program: Program, form: EditProgramForm) -> HttpRespo
     data = form.cleaned_data
     action = request.POST.get("action", "save")
     if action == "save_as":
-        try:
-            name = unique_name(request.user, data["save_as"] or "")
-        except Exception as exc:  # ValidationError: shown beside the field
-            form.add_error("save_as", exc)
-            return _render_editor(request, program, form, status=400)
-        if not name:
-            form.add_error("save_as", "Give the copy a name.")
-            return _render_editor(request, program, form, status=400)
-        copy = Program.objects.create(owner=request.user, name=name, language=data["language"])
-        copy.save_source(data["source"], request.user)
-        messages.success(request, f"Saved a copy as {copy.name}.")
-        return redirect("program-edit", copy.pk)
+        return _save_copy(request, program, form)
     program.language = data["language"]
     revision = program.save_source(data["source"], request.user)
     if action == "run":
         return _start(request, program, request.POST.get("robot", ""))
     messages.success(request, f"Saved (revision {revision.number}).")
     return redirect("program-edit", program.pk)
+
+
+def _save_copy(request, program: Program, form: EditProgramForm) -> HttpResponse:
+    """Save as: the edited text becomes a new program of the user's, the original stays."""
+    data = form.cleaned_data
+    try:
+        name = unique_name(request.user, data["save_as"])
+        if not name:
+            raise ValidationError("Give the copy a name.")
+    except ValidationError as exc:
+        form.add_error("save_as", exc)
+        return _render_editor(request, program, form, status=400)
+    copy = Program.objects.create(owner=request.user, name=name, language=data["language"])
+    copy.save_source(data["source"], request.user)
+    messages.success(request, f"Saved a copy as {copy.name}.")
+    return redirect("program-edit", copy.pk)
 
 
 def _start(request, program: Program, robot_name: str) -> HttpResponse:

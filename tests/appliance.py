@@ -60,7 +60,9 @@ class Appliance:
             "PYTHONUNBUFFERED": "1",
             **(extra_env or {}),
         }
-        self.env.pop("REDIS_URL", None) if mode == "embedded" else None
+        if mode == "embedded":
+            self.env.pop("REDIS_URL", None)
+            self.env.pop("DATABASE_URL", None)
         self.database = None
 
     # -- life cycle ---------------------------------------------------------------------------

@@ -13,7 +13,8 @@ from tests.appliance import ROBOTIDE, free_port, wait_for
 def start(data_dir, port, **env):
     environ = {k: v for k, v in os.environ.items() if k not in ("REDIS_URL", "DATABASE_URL")}
     environ.update(ROBOTIDE_DATA=str(data_dir), **env)
-    environ.pop("ROBOTIDE_ADMIN_PASSWORD", None) if "ROBOTIDE_ADMIN_PASSWORD" not in env else None
+    if "ROBOTIDE_ADMIN_PASSWORD" not in env:
+        environ.pop("ROBOTIDE_ADMIN_PASSWORD", None)
     return subprocess.Popen(
         [ROBOTIDE, "up", "--bind", f"127.0.0.1:{port}"],
         env=environ, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
