@@ -1,10 +1,12 @@
 FROM python:3.11-slim-bookworm
-# util-linux: setpriv and prlimit for the launcher; bash for shell programs.
-RUN apt-get update && apt-get install -y --no-install-recommends util-linux bash \
+# util-linux: setpriv and prlimit; bubblewrap: the runs' sandbox; nftables: their network.
+RUN apt-get update && apt-get install -y --no-install-recommends \
+        util-linux bash bubblewrap nftables \
     && rm -rf /var/lib/apt/lists/*
 WORKDIR /app
 COPY . /app
-RUN pip install --no-cache-dir /app
+# Editable: the templates/ folder is read from the source tree.
+RUN pip install --no-cache-dir -e /app
 ENV ROBOTIDE_DATA=/data
 EXPOSE 8000
 CMD ["robotide", "up", "--bind", "0.0.0.0:8000"]

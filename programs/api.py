@@ -1,11 +1,11 @@
 from datetime import datetime
+from typing import Literal
 
 from django.db import IntegrityError
 from django.http import HttpResponse, StreamingHttpResponse
 from ninja import Field, Router, Schema
-from ninja.errors import HttpError
 from ninja.responses import Status
-from pydantic import field_validator
+from pydantic import field_validator, model_validator
 
 from programs.access import get_program_for_user, get_run_for_user, programs_for_user, runs_for_user
 from programs.languages import LANGUAGES, get_language
@@ -16,28 +16,36 @@ from robots.models import get_robot_for_user
 programs_router = Router(tags=["programs"])
 runs_router = Router(tags=["runs"])
 
+# The allowed values in the OpenAPI schema; the validators below give the clearer errors.
+LANGUAGE_ENUM = {"enum": list(LANGUAGES)}
+RunState = Literal[tuple(Run.State.values)]
+
 
 class ProgramIn(Schema):
     name: str = Field(min_length=1, max_length=100)
-    language: str
+    language: str = Field(json_schema_extra=LANGUAGE_ENUM)
     source: str = ""
 
     @field_validator("language")
     @classmethod
     def known_language(cls, value):
+        if value is None:  # ProgramUpdate: unchanged
+            return value
         get_language(value)  # raises ValueError naming the known ones
         return value
 
     @field_validator("source")
     @classmethod
     def not_too_large(cls, value):
-        if len(value.encode()) > MAX_SOURCE_BYTES:
+        if value is not None and len(value.encode()) > MAX_SOURCE_BYTES:
             raise ValueError(f"source larger than {MAX_SOURCE_BYTES // 1024} KB")
         return value
 
     @field_validator("name")
     @classmethod
     def stripped(cls, value):
+        if value is None:
+            return value
         value = value.strip()
         if not value:
             raise ValueError("name must not be blank")
@@ -46,8 +54,16 @@ class ProgramIn(Schema):
 
 class ProgramUpdate(ProgramIn):
     name: str | None = Field(None, min_length=1, max_length=100)
-    language: str | None = None
+    language: str | None = Field(None, json_schema_extra=LANGUAGE_ENUM)
     source: str | None = None
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def an_object(cls, value, handler):
+        # Every field is optional: without this, a body of 0 or [] would be an empty update.
+        if not isinstance(value, dict):
+            raise ValueError("the body must be a JSON object")
+        return handler(value)
 
 
 class ProgramOut(Schema):
@@ -147,11 +163,9 @@ def list_languages(request):
 
 
 @runs_router.get("", response=list[RunOut])
-def list_runs(request, state: str | None = None, robot: str | None = None, limit: int = 100):
+def list_runs(request, state: RunState | None = None, robot: str | None = None, limit: int = 100):
     runs = runs_for_user(request.user)
     if state is not None:
-        if state not in Run.State.values:
-            raise HttpError(422, f"unknown state {state!r}; states: {', '.join(Run.State.values)}")
         runs = runs.filter(state=state)
     if robot is not None:
         runs = runs.filter(robot__name=robot)
@@ -164,11 +178,9 @@ def get_run(request, run_id: int):
 
 
 @runs_router.get("/{int:run_id}/log")
-def get_run_log(request, run_id: int, stream: str = "all"):
+def get_run_log(request, run_id: int, stream: Literal["all", "stdout", "stderr"] = "all"):
     run = get_run_for_user(request.user, run_id)
-    streams = {"all": "oes", "stdout": "o", "stderr": "e"}.get(stream)
-    if streams is None:
-        raise HttpError(422, "stream must be all, stdout or stderr")
+    streams = {"all": "oes", "stdout": "o", "stderr": "e"}[stream]
     if not run.log_path.exists():
         return HttpResponse(b"", content_type="text/plain; charset=utf-8")
     return StreamingHttpResponse(

@@ -1,6 +1,8 @@
 """Live run output and the live list of runs, as HTML fragments for htmx's ws extension."""
 
 import asyncio
+import logging
+from urllib.parse import parse_qs, urlencode
 
 from channels.db import database_sync_to_async
 from channels.generic.websocket import AsyncWebsocketConsumer
@@ -9,11 +11,12 @@ from django.template.loader import render_to_string
 from django.utils.html import escape
 
 from programs.access import get_run_for_user
-from programs.runlog import count_lines_between, render_lines, tail
+from programs.runlog import count_lines_between, lines_after, render_lines, tail
 from programs.views import run_tables_context
 from robots.bus import RUNS_GROUP, run_group
 
 LIST_REFRESH_INTERVAL = 0.5
+log = logging.getLogger(__name__)
 
 
 @database_sync_to_async
@@ -41,10 +44,19 @@ class RunConsumer(AsyncWebsocketConsumer):
         # Join first, then read the file: lines already in it are skipped by offset.
         await self.channel_layer.group_add(self.group, self.channel_name)
         await self.accept()
-        lines, skipped, self.offset = await asyncio.to_thread(tail, self.run.log_path)
-        head = skipped_line(skipped) if skipped else ""
-        await self.send(f'<div id="log-lines">{head}{render_lines(lines)}</div>')
+        await self.send(await asyncio.to_thread(self.catch_up, shown_up_to(self.scope)))
         await self.send_status()
+
+    def catch_up(self, page_offset: int | None) -> str:
+        """What the page lacks: the lines after those it was rendered with, else a new tail."""
+        if page_offset is not None:
+            lines, end = lines_after(self.run.log_path, page_offset)
+            if lines is not None:
+                self.offset = end
+                return f'<div id="log-lines" hx-swap-oob="beforeend">{render_lines(lines)}</div>'
+        lines, skipped, self.offset = tail(self.run.log_path)
+        head = skipped_line(skipped) if skipped else ""
+        return f'<div id="log-lines">{head}{render_lines(lines)}</div>'
 
     async def disconnect(self, code):
         if getattr(self, "group", None):
@@ -87,12 +99,7 @@ class RunListConsumer(AsyncWebsocketConsumer):
         if not self.scope["user"].is_authenticated:
             await self.close(code=4401)
             return
-        query = dict(
-            part.split("=", 1)
-            for part in self.scope["query_string"].decode().split("&")
-            if "=" in part
-        )
-        self.robot = query.get("robot") or None
+        self.robot = query_param(self.scope, "robot") or None
         self._pending: asyncio.TimerHandle | None = None
         await self.channel_layer.group_add(RUNS_GROUP, self.channel_name)
         await self.accept()
@@ -100,6 +107,8 @@ class RunListConsumer(AsyncWebsocketConsumer):
     async def disconnect(self, code):
         if self.scope["user"].is_authenticated:
             await self.channel_layer.group_discard(RUNS_GROUP, self.channel_name)
+        if getattr(self, "_pending", None) is not None:
+            self._pending.cancel()
 
     async def runs_changed(self, event):
         if self.robot and event.get("robot") != self.robot:
@@ -112,9 +121,26 @@ class RunListConsumer(AsyncWebsocketConsumer):
 
     async def refresh(self):
         self._pending = None
-        html = await database_sync_to_async(self._render)()
+        try:
+            html = await database_sync_to_async(self._render)()
+        except Exception:
+            log.exception("could not render the runs list")
+            return
         await self.send(html)
 
     def _render(self) -> str:
-        context = run_tables_context(self.scope["user"], self.robot)
-        return render_to_string("runs/_tables.html", {**context, "oob": True})
+        user = self.scope["user"]
+        context = run_tables_context(user, self.robot)
+        next_url = "/runs/" + (f"?{urlencode({'robot': self.robot})}" if self.robot else "")
+        extra = {"oob": True, "user": user, "next_url": next_url}
+        return render_to_string("runs/_tables.html", {**context, **extra})
+
+
+def query_param(scope, name: str) -> str | None:
+    values = parse_qs(scope["query_string"].decode()).get(name)
+    return values[0] if values else None
+
+
+def shown_up_to(scope) -> int | None:
+    value = query_param(scope, "from")
+    return int(value) if value and value.isdigit() else None

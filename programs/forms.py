@@ -3,6 +3,8 @@ from django import forms
 from programs.languages import language_choices, language_for_filename
 from programs.models import MAX_SOURCE_BYTES, Program
 
+MAX_NAME = Program._meta.get_field("name").max_length
+
 
 class NewProgramForm(forms.Form):
     name = forms.CharField(max_length=100)
@@ -70,6 +72,7 @@ def unique_name(owner, name: str) -> str:
 
 def free_name(owner, name: str) -> str:
     """`name`, or `name (2)`, `name (3)`... whichever the owner does not have yet."""
+    name = name[:MAX_NAME - 8]  # room for " (9999)" within the name's length
     taken = set(
         Program.objects.filter(owner=owner, name__startswith=name).values_list("name", flat=True)
     )

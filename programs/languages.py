@@ -45,8 +45,8 @@ class Language:
             raise LanguageUnavailable(self)
         return [path, *self.args, program_file]
 
-    def client_env(self) -> dict[str, str]:
-        return {var: str(CLIENTS_DIR / folder) for var, folder in self.client_paths.items()}
+    def client_env(self, clients_dir: Path = CLIENTS_DIR) -> dict[str, str]:
+        return {var: str(clients_dir / folder) for var, folder in self.client_paths.items()}
 
 
 class LanguageUnavailable(Exception):

@@ -1,17 +1,19 @@
 """The launcher: the paper's "wrapper script", as a command line built for each run.
 
-A run is started as ``setpriv --pdeathsig KILL -- prlimit <limits> -- <interpreter> <file>``:
-both are util-linux tools that set their part and exec the next, so the program keeps one
-process id, the limits are applied before any of its code runs, and it is killed if its agent
-dies. The supervisor adds a new session (own process group), the run's working directory and
-a clean environment built here.
+A run is started as ``[bwrap ...] setpriv <run's account> -- prlimit <limits> -- <interpreter>
+<file>``: each tool sets its part and execs the next, so the limits and the account are in
+place before any of the program's code runs (see programs.isolation for the account and the
+sandbox). The supervisor adds a new session, the run's working directory and the clean
+environment built here, and enforces what the kernel does not: wall-clock time, disk written
+and output size.
 """
 
 import shutil
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
-from programs.languages import SYSTEM_PATH, Language
+from programs.isolation import InForce
+from programs.languages import CLIENTS_DIR, SYSTEM_PATH, Language
 
 MB = 1024 * 1024
 
@@ -23,14 +25,17 @@ class LauncherUnavailable(RuntimeError):
 @dataclass(frozen=True)
 class Limits:
     cpu_seconds: int = 600
+    wall_seconds: int = 0  # 0: no limit (a robot's program may run all day)
     memory_mb: int = 1024
     processes: int = 64
     open_files: int = 256
     file_size_mb: int = 64
+    disk_mb: int = 256
+    log_size_mb: int = 64
 
     @classmethod
     def from_settings(cls, values: dict) -> "Limits":
-        names = cls.__dataclass_fields__
+        names = {f.name for f in fields(cls)}
         return cls(**{k: int(v) for k, v in values.items() if k in names})
 
     def prlimit_args(self) -> list[str]:
@@ -52,26 +57,41 @@ def _tool(name: str) -> str:
     return path
 
 
-def command(language: Language, program_file: Path, limits: Limits, args=()) -> list[str]:
-    return [
-        _tool("setpriv"), "--pdeathsig", "KILL", "--",
+def command(
+    language: Language,
+    program_file: Path,
+    limits: Limits,
+    args=(),
+    isolation: InForce | None = None,
+    uid: int | None = None,
+    socket_dir: Path | None = None,
+) -> list[str]:
+    """The run's command line; without `isolation` (tests of the supervisor) it stays as is."""
+    workdir = program_file.parent
+    seen_as = isolation.home(workdir) / program_file.name if isolation else program_file
+    argv = [
         _tool("prlimit"), *limits.prlimit_args(), "--",
-        *language.command(str(program_file)), *map(str, args),
+        *language.command(str(seen_as)), *map(str, args),
     ]  # fmt: skip
+    if isolation is None:
+        return [_tool("setpriv"), "--pdeathsig", "KILL", "--", *argv]
+    return isolation.wrap(argv, uid, workdir, socket_dir)
 
 
-def environment(language: Language, workdir: Path, extra: dict[str, str]) -> dict[str, str]:
+def environment(
+    language: Language, home: Path, extra: dict[str, str], clients_dir: Path = CLIENTS_DIR
+) -> dict[str, str]:
     """A clean environment: nothing of the server's, only what a program needs."""
     env = {
         "PATH": SYSTEM_PATH,
-        "HOME": str(workdir),
-        "TMPDIR": str(workdir),
+        "HOME": str(home),
+        "TMPDIR": str(home),
         "LANG": "C.UTF-8",
         "LC_ALL": "C.UTF-8",
         "TERM": "dumb",
         **language.env,
         **extra,
     }
-    for var, folder in language.client_env().items():
+    for var, folder in language.client_env(clients_dir).items():
         env[var] = f"{folder}:{env[var]}" if env.get(var) else folder
     return env

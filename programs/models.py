@@ -52,12 +52,6 @@ class Program(models.Model):
                 program=self, number=number, source=source, author=author
             )
 
-    def copy_as(self, name: str, owner) -> "Program":
-        with transaction.atomic():
-            copy = Program.objects.create(owner=owner, name=name, language=self.language)
-            copy.save_source(self.source, owner)
-        return copy
-
 
 class Revision(models.Model):
     program = models.ForeignKey(Program, on_delete=models.CASCADE, related_name="revisions")
@@ -93,7 +87,8 @@ class Run(models.Model):
     language = models.CharField(max_length=20)
     source = models.TextField(blank=True)
     args = models.JSONField(default=list, blank=True)
-    robot = models.ForeignKey(Robot, on_delete=models.CASCADE, related_name="runs")
+    # A robot with a history of runs is not deleted with it: runs belong to their users.
+    robot = models.ForeignKey(Robot, on_delete=models.PROTECT, related_name="runs")
     owner = models.ForeignKey(
         settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="runs"
     )
@@ -160,9 +155,17 @@ class Run(models.Model):
         )
 
     @classmethod
+    def claim(cls, run_id: int) -> bool:
+        """The agent takes a run that waits to start; False if it no longer waits."""
+        return cls.objects.filter(pk=run_id, state=cls.State.STARTING, pid__isnull=True).update(
+            pid=0
+        ) == 1
+
+    @classmethod
     def mark_ended(cls, run_id: int, state: str, exit_code: int | None, reason: str) -> None:
         now = timezone.now()
-        cls.objects.filter(pk=run_id).update(
+        # A run already marked lost stays lost: its end was never seen.
+        cls.objects.filter(pk=run_id).exclude(state=cls.State.LOST).update(
             state=state, exit_code=exit_code, reason=reason[:200], ended=now
         )
         cls.objects.filter(pk=run_id, started__isnull=True).update(started=now)
@@ -211,9 +214,14 @@ def _hand_to_agent(run: Run, message: dict) -> None:
         tell_agent_sync(run.robot.name, "run.start", **message)
     except ChannelFull:
         # Nobody has taken the robot's commands for a long while: say so instead of waiting.
-        reason = f"could not start: the agent of robot {run.robot.name!r} is not taking commands"
-        Run.mark_ended(run.pk, Run.State.FAILED, None, reason)
-        run.refresh_from_db()
+        fail_to_start(run, f"the agent of robot {run.robot.name!r} is not taking commands")
+    except Exception as exc:  # the channel layer itself is away (Redis down)
+        fail_to_start(run, f"the robot's agent cannot be reached ({type(exc).__name__})")
+
+
+def fail_to_start(run: Run, why: str) -> None:
+    Run.mark_ended(run.pk, Run.State.FAILED, None, f"could not start: {why}")
+    run.refresh_from_db()
 
 
 def request_stop(run: Run) -> None:

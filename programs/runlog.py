@@ -9,6 +9,7 @@ from django.utils.html import escape
 TAIL_LINES = 2000
 DOWNLOAD_CHUNK = 256 * 1024
 BLOCK = 256 * 1024
+CATCH_UP_BYTES = 256 * 1024
 
 
 def tail(path: Path, limit: int = TAIL_LINES) -> tuple[list[tuple[str, str]], int, int]:
@@ -37,6 +38,23 @@ def tail(path: Path, limit: int = TAIL_LINES) -> tuple[list[tuple[str, str]], in
         kept = lines[-limit:]
         earlier = len(lines) - len(kept) + count_lines(f, start)
     return [_tagged(line) for line in kept], earlier, max(end, 0)
+
+
+def lines_after(path: Path, start: int, limit: int = CATCH_UP_BYTES):
+    """(complete lines from byte `start` on, offset after them); (None, start) if more than
+    `limit` bytes came meanwhile: a tail serves the reader better then."""
+    try:
+        f = open(path, "rb")  # noqa: SIM115
+    except FileNotFoundError:  # nothing written yet
+        return ([], 0) if start == 0 else (None, start)
+    with f:
+        size = f.seek(0, os.SEEK_END)
+        if size - start > limit or start > size:
+            return None, start
+        f.seek(start)
+        data = f.read(size - start)
+    end = data.rfind(b"\n") + 1
+    return [_tagged(line) for line in data[:end].split(b"\n")[:-1]], start + end
 
 
 def count_lines_between(path: Path, start: int, end: int) -> int:

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from subprocess import DEVNULL, PIPE
 
+from programs.watch import RunWatch, signal_account
+
 STDOUT, STDERR, SYSTEM = b"o", b"e", b"s"
 TAG_OF_FD = {1: STDOUT, 2: STDERR}
 MAX_LINE = 64 * 1024  # a longer line without a newline is cut into pieces of this size
@@ -42,10 +44,6 @@ class Outcome:
     reason: str
 
 
-def parse_log_line(line: bytes) -> tuple[str, bytes]:
-    return line[:1].decode(), line[2:]
-
-
 def format_reason(returncode: int) -> str:
     if returncode >= 0:
         return f"exit status {returncode}"
@@ -67,8 +65,15 @@ class RunProcess:
         max_log_bytes: int = 64 * 1024 * 1024,
         grace: float = 3.0,
         batch_interval: float = 0.1,
+        watch: RunWatch | None = None,
+        wrapped: bool = False,
     ):
+        """`watch`: the run's own account, watched and signalled as a whole (see watch.py).
+        `wrapped`: a sandbox runs the program and reports its death by signal N as 128 + N.
+        """
         self.argv, self.env, self.cwd, self.log_path = argv, env, cwd, log_path
+        self.watch, self.wrapped = watch, wrapped
+        self._watcher: asyncio.Task | None = None
         self.on_output = on_output
         self.max_log_bytes = max_log_bytes
         self.grace = grace
@@ -107,10 +112,14 @@ class RunProcess:
                 cwd=self.cwd,
                 env=self.env,
                 start_new_session=True,
+                # The server's own umask is 077; a sandbox's mount points must be traversable.
+                umask=0o022,
             )
         except OSError:
             self._log.close()
             raise
+        if self.watch is not None:
+            self._watcher = loop.create_task(self.watch.run(self._limit_reached))
         return self.pid
 
     @property
@@ -132,6 +141,8 @@ class RunProcess:
 
     def outcome(self) -> Outcome:
         rc = self.returncode
+        if self.wrapped and rc is not None and 128 < rc <= 128 + 64:
+            rc = -(rc - 128)
         if self._stop_reason is not None:
             return Outcome(self._stop_state, rc, self._stop_reason)
         state = "finished" if rc == 0 else "failed"
@@ -144,6 +155,8 @@ class RunProcess:
     # -- output ---------------------------------------------------------------------------
 
     def _feed(self, fd: int, data: bytes) -> None:
+        if fd == 2 and self.watch is not None:
+            self.watch.saw_stderr(data)
         buffer = self._partial[fd] + data
         lines = buffer.split(b"\n")
         if len(buffer) > MAX_LINE:  # only then can a line be too long: worth a look
@@ -214,10 +227,22 @@ class RunProcess:
     # -- process --------------------------------------------------------------------------
 
     def _signal_group(self, sig: int) -> None:
+        """To the program's processes: by its account if it has one, else by its group.
+
+        The account's processes are the program's alone: a sandbox around them is spared a
+        SIGTERM (it would answer with SIGKILL to all) and a child that left the group is not.
+        """
+        if self.watch is not None:
+            signal_account(self.watch.uid, sig)
+            if sig != signal.SIGKILL:
+                return
         try:
             os.killpg(self.pid, sig)
         except (ProcessLookupError, PermissionError):
             pass
+
+    def _limit_reached(self, reason: str) -> None:
+        self.stop(reason, state="failed")
 
     def _kill_late(self) -> None:
         if self.running:
@@ -234,6 +259,10 @@ class RunProcess:
             self._kill_handle.cancel()
         for fd in (1, 2):
             self._end_of_stream(fd)
+        if self._watcher is not None:
+            self._watcher.cancel()
+            for note in self.watch.notes():
+                self._append(SYSTEM, [f"[robotide] {note}".encode()], force=True)
         outcome = self.outcome()
         self._append(SYSTEM, [f"[robotide] {outcome.state}: {outcome.reason}".encode()], force=True)
         if self._flush_handle is not None:

@@ -13,7 +13,7 @@ from programs.forms import EditProgramForm, NewProgramForm, UploadForm, unique_n
 from programs.languages import get_language
 from programs.models import Program, Run, RunRefused, request_stop, start_run
 from programs.runlog import plain_text, render_lines, tail
-from robots.models import Robot, get_robot_for_user
+from robots.models import get_robot_for_user, robots_for_user
 
 
 @login_required
@@ -25,7 +25,7 @@ def program_list(request: HttpRequest) -> HttpResponse:
             "programs": programs_for_user(request.user),
             "new_form": NewProgramForm(owner=request.user, auto_id="new_%s"),
             "upload_form": UploadForm(owner=request.user, auto_id="upload_%s"),
-            "robots": Robot.objects.all(),
+            "robots": robots_for_user(request.user),
         },
     )
 
@@ -64,7 +64,7 @@ def _list_with_errors(request, **forms) -> HttpResponse:
         "programs": programs_for_user(request.user),
         "new_form": NewProgramForm(owner=request.user, auto_id="new_%s"),
         "upload_form": UploadForm(owner=request.user, auto_id="upload_%s"),
-        "robots": Robot.objects.all(),
+        "robots": robots_for_user(request.user),
         **forms,
     }
     return render(request, "programs/list.html", context, status=400)
@@ -86,7 +86,7 @@ def _render_editor(request, program, form, status=200):
         "program": program,
         "form": form,
         "language": program.lang,
-        "robots": Robot.objects.all(),
+        "robots": robots_for_user(request.user),
         "runs": runs_for_user(request.user).filter(program=program)[:10],
         "revision": program.revisions.first(),
     }
@@ -214,19 +214,16 @@ def run_tables_context(user, robot: str | None) -> dict:
         "running": runs.filter(state__in=Run.ACTIVE),
         "recent": runs.exclude(state__in=Run.ACTIVE)[:50],
         "robot_filter": robot,
-        "robots": Robot.objects.all(),
+        "robots": robots_for_user(user),
     }
 
 
 @login_required
 def run_detail(request: HttpRequest, run_id: int) -> HttpResponse:
     run = get_run_for_user(request.user, run_id)
-    lines, skipped, _ = tail(run.log_path)
-    return render(
-        request,
-        "runs/detail.html",
-        {"run": run, "log_html": render_lines(lines), "skipped": skipped},
-    )
+    lines, skipped, offset = tail(run.log_path)
+    context = {"run": run, "log_html": render_lines(lines), "skipped": skipped, "offset": offset}
+    return render(request, "runs/detail.html", context)
 
 
 @login_required

@@ -21,6 +21,9 @@ class Robot(abc.ABC):
 
     #: Short name of the kind of robot, shown in capabilities and error messages.
     kind = "robot"
+    #: True if every method answers without waiting on anything (no I/O): its callers may
+    #: then skip a task per call. A driver that talks to hardware leaves it False.
+    quick = False
 
     def __init__(self, url: str, *, max_linear: float = 0.5, max_angular: float = 2.0) -> None:
         self.url = url

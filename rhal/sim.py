@@ -37,6 +37,7 @@ Pose = tuple[float, float, float]
 
 class SimRobot(Robot):
     kind = "sim"
+    quick = True  # computed in-process: nothing to wait for
 
     def __init__(
         self,

@@ -1,6 +1,9 @@
 from django.contrib import admin
 
 from robotide.models import ApiToken
+from robotide.security import AdminLoginForm
+
+admin.site.login_form = AdminLoginForm  # throttled like the sign-in page
 
 
 @admin.register(ApiToken)

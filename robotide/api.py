@@ -3,7 +3,8 @@
 Authenticated by the session (with CSRF) or ``Authorization: Bearer <token>``.
 """
 
-from django.http import Http404
+from django.http import Http404, JsonResponse
+from django.views import defaults
 from ninja import NinjaAPI
 from ninja.errors import AuthenticationError, HttpError
 from ninja.security import HttpBearer, django_auth
@@ -23,7 +24,59 @@ class BearerToken(HttpBearer):
         return user
 
 
-api = NinjaAPI(
+ERROR = {
+    "type": "object",
+    "properties": {"detail": {"type": "string"}},
+    "required": ["detail"],
+}
+# Pydantic's validation errors come as a list: [{"type", "loc", "msg"}, ...].
+VALIDATION_ERROR = {
+    "type": "object",
+    "properties": {"detail": {"anyOf": [{"type": "string"}, {"type": "array"}]}},
+    "required": ["detail"],
+}
+ERROR_DESCRIPTIONS = {
+    400: "Bad Request (the body is not JSON)",
+    401: "Unauthorized",
+    403: "Forbidden (staff only, or a session request without its CSRF token)",
+    404: "Not Found",
+    413: "Request too large",
+    422: "Unprocessable Content (invalid parameters or body)",
+}
+
+
+class RobotideAPI(NinjaAPI):
+    """NinjaAPI whose schema also documents the errors every operation can answer with."""
+
+    def get_openapi_schema(self, **kwargs):
+        schema = super().get_openapi_schema(**kwargs)
+        for operations in schema["paths"].values():
+            for method, operation in operations.items():
+                statuses = set()
+                if operation.get("security"):
+                    statuses.add(401)
+                    if method != "get":
+                        statuses.add(403)
+                if any(p["in"] == "path" for p in operation.get("parameters", [])):
+                    statuses.add(404)
+                if operation.get("parameters") or "requestBody" in operation:
+                    statuses.add(422)
+                if "requestBody" in operation:
+                    statuses.update((400, 413))
+                responses = operation["responses"]
+                for status in sorted(statuses):
+                    body = VALIDATION_ERROR if status == 422 else ERROR
+                    responses.setdefault(
+                        str(status),
+                        {
+                            "description": ERROR_DESCRIPTIONS[status],
+                            "content": {"application/json": {"schema": body}},
+                        },
+                    )
+        return schema
+
+
+api = RobotideAPI(
     title="robotide",
     version="1",
     description="Programs, runs and robots of a robotide appliance.",
@@ -56,4 +109,11 @@ def run_refused(request, exc):
     return api.create_response(request, {"detail": str(exc)}, status=409)
 
 
-__all__ = ["api", "HttpError"]
+__all__ = ["api", "HttpError", "page_not_found"]
+
+
+def page_not_found(request, exception):
+    """Django's 404 page, or JSON under /api/ (a path no route matches, e.g. /api/runs/x)."""
+    if request.path.startswith("/api/"):
+        return JsonResponse({"detail": "Not found."}, status=404)
+    return defaults.page_not_found(request, exception)

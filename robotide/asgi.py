@@ -18,6 +18,7 @@ from channels.security.websocket import AllowedHostsOriginValidator  # noqa: E40
 from django.urls import path  # noqa: E402
 
 from programs.consumers import RunConsumer, RunListConsumer  # noqa: E402
+from robotide.security import SameOriginWebsocket  # noqa: E402
 from robots.consumers import RobotConsumer  # noqa: E402
 
 websocket_urlpatterns = [
@@ -29,8 +30,8 @@ websocket_urlpatterns = [
 application = ProtocolTypeRouter(
     {
         "http": django_http_app,
-        "websocket": AllowedHostsOriginValidator(
-            AuthMiddlewareStack(URLRouter(websocket_urlpatterns))
+        "websocket": SameOriginWebsocket(
+            AllowedHostsOriginValidator(AuthMiddlewareStack(URLRouter(websocket_urlpatterns)))
         ),
     }
 )

@@ -15,6 +15,8 @@ import secrets
 import signal
 import sys
 
+import uvicorn
+
 DEFAULT_BIND = "127.0.0.1:8000"
 
 
@@ -39,6 +41,8 @@ def main(argv: list[str] | None = None) -> int:
     args, rest = parser.parse_known_args(argv)
     if args.command != "manage" and rest:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
+    # What the server writes is its own; run accounts get only what is opened to them.
+    os.umask(0o077)
     setup_django()
     return {"up": cmd_up, "agent": cmd_agent, "token": cmd_token, "manage": cmd_manage}[
         args.command
@@ -51,6 +55,7 @@ def cmd_up(args, rest) -> int:
 
     host, port = parse_bind(args.bind)
     call_command("migrate", interactive=False, verbosity=0)
+    protect_data_dir()
     ensure_admin()
     ensure_sim_robot()
     embedded = not settings.REDIS_URL
@@ -65,6 +70,17 @@ def parse_bind(bind: str) -> tuple[str, int]:
     if not sep or not port.isdigit():
         raise SystemExit(f"robotide: --bind must be HOST:PORT, not {bind!r}")
     return host.strip("[]") or "127.0.0.1", int(port)
+
+
+def protect_data_dir() -> None:
+    """Run accounts may pass through the data folder to their own, and read nothing in it."""
+    from django.conf import settings
+
+    settings.RUNS_DIR.mkdir(exist_ok=True)
+    for folder in (settings.DATA_DIR, settings.RUNS_DIR):
+        folder.chmod(0o711)
+    for path in settings.DATA_DIR.glob("robotide.sqlite3*"):
+        path.chmod(0o600)
 
 
 def ensure_admin() -> None:
@@ -92,8 +108,6 @@ def ensure_sim_robot() -> None:
 
 
 async def serve(host: str, port: int, with_agents: bool) -> None:
-    import uvicorn
-
     from robots import bus
     from robots.agent import AgentManager
 
@@ -118,25 +132,20 @@ async def serve(host: str, port: int, with_agents: bool) -> None:
             await manager.shutdown()
 
 
-class _Server:
-    """uvicorn's server, with signals handled on our loop so the agents shut down cleanly."""
+class _Server(uvicorn.Server):
+    """uvicorn's server, with signals handled on our loop so the agents shut down cleanly
+    (uvicorn's own handlers re-raise the signal once it has stopped, killing the process)."""
 
-    def __new__(cls, config):
-        import uvicorn
-
-        class Server(uvicorn.Server):
-            @contextlib.contextmanager
-            def capture_signals(self):
-                loop = asyncio.get_running_loop()
-                for sig in (signal.SIGINT, signal.SIGTERM):
-                    loop.add_signal_handler(sig, self.handle_exit, sig, None)
-                try:
-                    yield
-                finally:
-                    for sig in (signal.SIGINT, signal.SIGTERM):
-                        loop.remove_signal_handler(sig)
-
-        return Server(config)
+    @contextlib.contextmanager
+    def capture_signals(self):
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, self.handle_exit, sig, None)
+        try:
+            yield
+        finally:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                loop.remove_signal_handler(sig)
 
 
 def cmd_agent(args, rest) -> int:
@@ -146,6 +155,7 @@ def cmd_agent(args, rest) -> int:
         print(f"robotide: no robot named {args.name!r}; add it in the admin or POST /api/robots",
               file=sys.stderr)  # fmt: skip
         return 2
+    protect_data_dir()
     asyncio.run(run_agent(args.name))
     return 0
 

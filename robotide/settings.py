@@ -153,7 +153,84 @@ AUTH_PASSWORD_VALIDATORS = [
 LOGIN_URL = "login"
 LOGIN_REDIRECT_URL = "program-list"
 LOGOUT_REDIRECT_URL = "login"
-SESSION_COOKIE_AGE = env_int("SESSION_COOKIE_AGE", 14 * 24 * 3600)
+
+# -- Web security (CSP, HTTPS, cookies, login throttling, request size) -----------------------
+# A session ends this many hours after signing in, whether or not the browser is closed.
+SESSION_COOKIE_AGE = env_int("ROBOTIDE_SESSION_HOURS", 12) * 3600
+SESSION_COOKIE_HTTPONLY = True
+SESSION_COOKIE_SAMESITE = "Lax"
+CSRF_COOKIE_SAMESITE = "Lax"
+SECURE_CONTENT_TYPE_NOSNIFF = True
+SECURE_REFERRER_POLICY = "same-origin"
+X_FRAME_OPTIONS = "DENY"
+
+HTTPS = env_bool("ROBOTIDE_HTTPS", False)
+if HTTPS:
+    SESSION_COOKIE_SECURE = True
+    CSRF_COOKIE_SECURE = True
+    SECURE_HSTS_SECONDS = 365 * 24 * 3600
+    SECURE_HSTS_INCLUDE_SUBDOMAINS = True
+    SECURE_SSL_REDIRECT = env_bool("ROBOTIDE_HTTPS_REDIRECT", False)
+if env_bool("ROBOTIDE_BEHIND_PROXY", False):
+    # Only behind a proxy that sets (not forwards) the header: otherwise clients could claim HTTPS.
+    SECURE_PROXY_SSL_HEADER = ("HTTP_X_FORWARDED_PROTO", "https")
+
+# No inline script or style anywhere: pages load only our own static files. Program drawings
+# are data: images. robotide.security adds this host's ws: or wss: to connect-src for browsers
+# whose 'self' does not cover websockets (Safari before 15.4).
+SELF, NONE = "'self'", "'none'"
+CONTENT_SECURITY_POLICY = {
+    "DIRECTIVES": {
+        "default-src": [SELF],
+        "script-src": [SELF],
+        "style-src": [SELF],
+        "img-src": [SELF, "data:"],
+        "connect-src": [SELF],
+        "frame-ancestors": [NONE],
+        "object-src": [NONE],
+        "base-uri": [SELF],
+        "form-action": [SELF],
+    }
+}
+# "ninja" serves the API docs from our static files (no CDN, no inline script).
+INSTALLED_APPS += ["csp", "ninja"]
+MIDDLEWARE.insert(
+    MIDDLEWARE.index("django.middleware.security.SecurityMiddleware") + 1,
+    "robotide.security.RequestSizeLimitMiddleware",
+)
+MIDDLEWARE.insert(
+    MIDDLEWARE.index("django.middleware.security.SecurityMiddleware") + 1,
+    "robotide.security.CSPMiddleware",
+)
+
+# Programs are at most 512 KB (programs.models.MAX_SOURCE_BYTES); a form or JSON body carrying
+# one grows by escaping (%XX, \uXXXX). Larger requests are refused with 413 before being read.
+MAX_REQUEST_BYTES = env_int("ROBOTIDE_MAX_REQUEST_KB", 2048) * 1024
+DATA_UPLOAD_MAX_MEMORY_SIZE = MAX_REQUEST_BYTES
+FILE_UPLOAD_MAX_MEMORY_SIZE = MAX_REQUEST_BYTES
+DATA_UPLOAD_MAX_NUMBER_FIELDS = 400  # the admin's bulk actions post one field per row
+DATA_UPLOAD_MAX_NUMBER_FILES = 10
+
+# Failed sign-ins within `window_seconds` lock a (user name, address) pair after `failures`, an
+# address after `address_failures` (more: a lab shares one address), for `lock_seconds`.
+LOGIN_THROTTLE = {
+    "failures": env_int("ROBOTIDE_LOGIN_FAILURES", 5),
+    "address_failures": env_int("ROBOTIDE_LOGIN_ADDRESS_FAILURES", 50),
+    "window_seconds": env_int("ROBOTIDE_LOGIN_WINDOW_SECONDS", 900),
+    "lock_seconds": env_int("ROBOTIDE_LOGIN_LOCK_SECONDS", 300),
+}
+AUTHENTICATION_BACKENDS = ["robotide.security.ThrottledModelBackend"]
+# The throttle's counters live in the cache: per process by default, shared through Redis in
+# fleet mode so every web worker sees the same failures.
+if REDIS_URL:
+    CACHES = {
+        "default": {
+            "BACKEND": "django.core.cache.backends.redis.RedisCache",
+            "LOCATION": REDIS_URL,
+            "KEY_PREFIX": "robotide",
+        }
+    }
+# -- end of Web security --------------------------------------------------------------------------
 
 LANGUAGE_CODE = "en-us"
 TIME_ZONE = os.environ.get("TIME_ZONE", "UTC")
@@ -175,12 +252,20 @@ WHITENOISE_AUTOREFRESH = DEBUG
 # Limits a run gets unless its robot's settings say otherwise (see programs.launcher).
 RUN_DEFAULTS = {
     "cpu_seconds": env_int("ROBOTIDE_RUN_CPU_SECONDS", 600),
+    "wall_seconds": env_int("ROBOTIDE_RUN_WALL_SECONDS", 0),
     "memory_mb": env_int("ROBOTIDE_RUN_MEMORY_MB", 1024),
     "processes": env_int("ROBOTIDE_RUN_PROCESSES", 64),
     "open_files": env_int("ROBOTIDE_RUN_OPEN_FILES", 256),
     "file_size_mb": env_int("ROBOTIDE_RUN_FILE_SIZE_MB", 64),
+    "disk_mb": env_int("ROBOTIDE_RUN_DISK_MB", 256),
     "log_size_mb": env_int("ROBOTIDE_RUN_LOG_SIZE_MB", 64),
     "stop_grace_seconds": 3,
+}
+# -- Program isolation (programs.isolation): a robot's settings may override each.
+RUN_ISOLATION = {
+    "isolation": os.environ.get("ROBOTIDE_RUN_ISOLATION", "auto"),
+    "network": os.environ.get("ROBOTIDE_RUN_NETWORK", "loopback"),
+    "tmp_mb": env_int("ROBOTIDE_RUN_TMP_MB", 64),
 }
 
 LOGGING = {

@@ -5,6 +5,7 @@ from django.views.generic import RedirectView
 
 from programs import views as programs
 from robotide.api import api
+from robotide.security import LoginForm
 from robots import views as robots
 
 urlpatterns = [
@@ -31,7 +32,11 @@ urlpatterns = [
     path("robots/<slug:name>/estop", robots.robot_estop, name="robot-estop"),
     path("robots/<slug:name>/run", robots.robot_run, name="robot-run"),
     path("robots/<slug:name>/camera.jpg", robots.robot_camera, name="robot-camera"),
-    path("accounts/login/", auth_views.LoginView.as_view(), name="login"),
+    path(
+        "accounts/login/",
+        auth_views.LoginView.as_view(authentication_form=LoginForm),
+        name="login",
+    ),
     path("accounts/logout/", auth_views.LogoutView.as_view(), name="logout"),
     path(
         "accounts/password/",
@@ -46,3 +51,5 @@ urlpatterns = [
     path("api/", api.urls),
     path("admin/", admin.site.urls),
 ]
+
+handler404 = "robotide.api.page_not_found"

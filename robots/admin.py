@@ -6,7 +6,8 @@ from robots.models import Robot
 
 @admin.register(Robot)
 class RobotAdmin(admin.ModelAdmin):
-    list_display = ["name", "url", "description", "last_seen"]
+    list_display = ["name", "url", "description", "isolation", "last_seen"]
+    readonly_fields = ["isolation", "last_seen"]
     search_fields = ["name", "url", "description"]
 
     def save_model(self, request, obj, form, change):

@@ -16,6 +16,7 @@ import tempfile
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
+from signal import SIGKILL
 
 from channels.db import database_sync_to_async
 from channels.layers import get_channel_layer
@@ -24,9 +25,18 @@ from django.utils import timezone
 
 import rhal
 from programs import launcher
-from programs.languages import LanguageUnavailable, get_language
+from programs.isolation import (
+    NETWORKS,
+    InForce,
+    IsolationUnavailable,
+    Policy,
+    prepare_workdir,
+    unreachable_ancestor,
+)
+from programs.languages import CLIENTS_DIR, LanguageUnavailable, get_language
 from programs.models import Run
 from programs.supervisor import RunProcess
+from programs.watch import RunWatch, signal_account
 from robots import rpc
 from robots.bus import MANAGER_CHANNEL, RUNS_GROUP, run_group
 from robots.models import Robot, agent_channel, robot_group
@@ -45,7 +55,6 @@ class ActiveRun:
     run_id: int
     token: str
     process: RunProcess
-    drove: bool = False
     watcher: asyncio.Task | None = field(default=None, repr=False)
 
 
@@ -57,15 +66,21 @@ class RobotAgent:
         self.runs: dict[int, ActiveRun] = {}
         self.tokens: dict[str, ActiveRun] = {}
         self.shows: dict[str, dict] = {}
+        self.motion_owner: int | None = None  # the run whose drive() the robot follows now
+        self.cancelled: set[int] = set()  # stopped before their start was handled
+        self._shows_snapshot_due = True
         self.layer = get_channel_layer()
         self.driver: rhal.Robot | None = None
         self.api = RobotApi(self)
         # A short private folder: Unix socket paths are limited to 107 bytes.
         self.socket_dir = Path(tempfile.mkdtemp(prefix="robotide-"))
-        self.server = rpc.RobotApiServer(self.api.handle, unix_path=self.socket_dir / "api.sock")
+        self.server = rpc.RobotApiServer(
+            self.api.handle, unix_path=self.socket_dir / "api.sock", quick=self.api.quick
+        )
         self.ready = asyncio.Event()
         self._outbox: asyncio.Queue = asyncio.Queue()
         self._tasks: list[asyncio.Task] = []
+        self._starting: set[asyncio.Task] = set()
 
     # -- life cycle -----------------------------------------------------------------------
 
@@ -80,12 +95,21 @@ class RobotAgent:
     async def start(self) -> None:
         robot = await database_sync_to_async(Robot.objects.get)(name=self.name)
         self.limits = robot.run_limits(settings.RUN_DEFAULTS)
+        self.isolation, self.isolation_error = resolve_isolation(robot)
+        await database_sync_to_async(Robot.objects.filter(name=self.name).update)(
+            isolation=self.isolation.describe() if self.isolation else self.isolation_error
+        )
         self.driver = rhal.connect(robot.url, **robot.driver_options())
         await self.driver.open()
+        self.units = flat_units(self.driver.capabilities().get("sensors", {}))
         lost = await database_sync_to_async(Run.mark_lost)(self.name)
         for run_id in lost:
+            end_leftovers(run_id)
             self.publish(run_group(run_id), {"type": "run.state", "run_id": run_id})
         self.api_address = await self.server.start()
+        # Run accounts reach the socket; the token, not the file mode, decides who is served.
+        self.socket_dir.chmod(0o711)
+        self.server.unix_path.chmod(0o666)
         self._tasks = [
             asyncio.create_task(self._receive_loop(), name=f"{self.name}-receive"),
             asyncio.create_task(self._publish_loop(), name=f"{self.name}-publish"),
@@ -95,6 +119,8 @@ class RobotAgent:
         log.info("agent %s: %s, Robot API on %s", self.name, robot.url, self.api_address)
 
     async def shutdown(self) -> None:
+        if self._starting:  # let starts under way finish, so their programs are stopped too
+            await asyncio.wait(self._starting, timeout=5)
         for active in list(self.runs.values()):
             active.process.stop("robot agent shutting down")
         watchers = [a.watcher for a in self.runs.values() if a.watcher]
@@ -133,14 +159,21 @@ class RobotAgent:
     async def dispatch(self, message: dict) -> None:
         kind = message.get("type")
         if kind == "run.start":
-            await self.start_run(message)
+            # In a task: a stop or an emergency stop must not wait behind a program's start.
+            task = asyncio.create_task(self.start_run(message))
+            self._starting.add(task)
+            task.add_done_callback(self._starting.discard)
         elif kind == "run.stop":
-            self.stop_run(message["run_id"], "stopped by user")
+            if not self.stop_run(message["run_id"], "stopped by user"):
+                self.cancelled.add(message["run_id"])
         elif kind == "robot.estop":
             stopped = await self.estop()
             await self.reply(message, {"stopped": stopped})
         elif kind == "robot.sensors":
             await self.reply(message, {"sensors": await self.driver.sensors()})
+        elif kind == "robot.state":
+            state = {"sensors": await self.driver.sensors(), "units": self.units}
+            await self.reply(message, {**state, "shows": self.shows})
         elif kind == "robot.camera":
             await self.reply(message, {"jpeg": await self.driver.camera_jpeg()})
         else:
@@ -154,42 +187,64 @@ class RobotAgent:
 
     async def start_run(self, message: dict) -> None:
         run_id = message["run_id"]
+        # Only a run still waiting to start: not one marked lost or failed meanwhile.
+        if not await database_sync_to_async(Run.claim)(run_id):
+            return
+        if run_id in self.cancelled:
+            self.cancelled.discard(run_id)
+            await self._end_run(run_id, "stopped", None, "stopped by user before it started")
+            return
         try:
             active = await self._launch(run_id, message)
-        except (LanguageUnavailable, launcher.LauncherUnavailable, ValueError, OSError) as exc:
+        except (
+            LanguageUnavailable, launcher.LauncherUnavailable, IsolationUnavailable,
+            ValueError, OSError,
+        ) as exc:  # fmt: skip
             await self._end_run(run_id, "failed", None, f"could not start: {exc}")
             return
         await database_sync_to_async(Run.mark_running)(run_id, active.process.pid)
         self._run_changed(run_id)
 
     async def _launch(self, run_id: int, message: dict) -> ActiveRun:
+        if self.isolation is None:
+            raise IsolationUnavailable(self.isolation_error)
         language = get_language(message["language"])
         directory = settings.RUNS_DIR / str(run_id)
         workdir = directory / "work"
         workdir.mkdir(parents=True, exist_ok=True)
         program_file = workdir / message["filename"]
         program_file.write_text(message["source"])
+        uid = self.isolation.uid(run_id)
+        prepare_workdir(workdir, uid)
         limits = launcher.Limits.from_settings(self.limits)
         token = secrets.token_urlsafe(24)
+        socket_seen_as = self.isolation.api_dir(self.socket_dir) / self.server.unix_path.name
         env = launcher.environment(
             language,
-            workdir,
+            self.isolation.home(workdir),
             {
-                "ROBOT_API": self.server.url,
+                "ROBOT_API": f"unix:{socket_seen_as}",
                 "ROBOT_API_TCP": self.api_address,
                 "ROBOT_TOKEN": token,
                 "ROBOT_NAME": self.name,
                 "ROBOT_RUN_ID": str(run_id),
             },
+            clients_dir=self.isolation.clients(),
         )
+        argv = launcher.command(
+            language, program_file, limits, message.get("args", ()),
+            isolation=self.isolation, uid=uid, socket_dir=self.socket_dir,
+        )  # fmt: skip
         process = RunProcess(
-            launcher.command(language, program_file, limits, message.get("args", ())),
+            argv,
             env=env,
             cwd=workdir,
             log_path=directory / "output.log",
             on_output=partial(self._publish_output, run_id),
-            max_log_bytes=int(self.limits["log_size_mb"]) * 1024 * 1024,
+            max_log_bytes=limits.log_size_mb * 1024 * 1024,
             grace=float(self.limits["stop_grace_seconds"]),
+            watch=RunWatch(limits, uid, workdir),
+            wrapped=self.isolation.sandbox,
         )
         # The token is good before the program starts: it may call auth at once.
         active = ActiveRun(run_id, token, process)
@@ -209,10 +264,20 @@ class RobotAgent:
         # The token dies with the run, before anything else can use it.
         self.tokens.pop(active.token, None)
         self.runs.pop(active.run_id, None)
-        if active.drove and not any(a.drove for a in self.runs.values()):
+        if self.motion_owner == active.run_id:  # its motion ends with it, however it ended
+            self.motion_owner = None
             with contextlib.suppress(rhal.RhalError):
                 await self.driver.stop()
+        self.forget_shows(active.run_id)
+        shutil.rmtree(settings.RUNS_DIR / str(active.run_id) / "work", ignore_errors=True)
         await self._end_run(active.run_id, outcome.state, outcome.exit_code, outcome.reason)
+
+    def forget_shows(self, run_id: int) -> None:
+        """What an ended run showed goes from the robot's page with it."""
+        for name in [n for n, entry in self.shows.items() if entry["run"] == run_id]:
+            del self.shows[name]
+            self.api.changed_shows.pop(name, None)
+        self._shows_snapshot_due = True
 
     async def _end_run(self, run_id, state, exit_code, reason) -> None:
         await database_sync_to_async(Run.mark_ended)(run_id, state, exit_code, reason)
@@ -227,6 +292,7 @@ class RobotAgent:
 
     async def estop(self) -> int:
         stopped = sum(self.stop_run(run_id, "emergency stop") for run_id in list(self.runs))
+        self.motion_owner = None
         await self.driver.stop()
         return stopped
 
@@ -259,15 +325,16 @@ class RobotAgent:
         """Latest-state snapshots, throttled at the source; all shown values once a second."""
         last_heartbeat = 0.0
         loop = asyncio.get_running_loop()
-        specs = self.driver.capabilities().get("sensors", {})
-        units = flat_units(specs)
+        units = self.units
         for tick in itertools.count():
             try:
                 sensors = await self.driver.sensors()
             except rhal.RhalError as exc:
                 sensors = {"error": str(exc)}
             changed, self.api.changed_shows = self.api.changed_shows, {}
-            shows = dict(self.shows) if tick % SHOWS_SNAPSHOT_EVERY == 0 else changed
+            full = self._shows_snapshot_due or tick % SHOWS_SNAPSHOT_EVERY == 0
+            self._shows_snapshot_due = False
+            shows = dict(self.shows) if full else changed
             self.publish(
                 self.group,
                 {
@@ -276,6 +343,7 @@ class RobotAgent:
                     "sensors": sensors,
                     "units": units,
                     "shows": shows,
+                    "all_shows": full,  # a full snapshot replaces what the page shows
                 },
             )
             if loop.time() - last_heartbeat >= HEARTBEAT_INTERVAL:
@@ -299,6 +367,29 @@ def flat_units(specs: dict) -> dict[str, str]:
         else:
             units[name] = unit
     return units
+
+
+def end_leftovers(run_id: int) -> None:
+    """Whatever a lost run left running ends now: its account's processes are all its own."""
+    for network in NETWORKS:
+        signal_account(InForce(sandbox=False, network=network, tmp_mb=0).uid(run_id), SIGKILL)
+
+
+def resolve_isolation(robot: Robot) -> tuple[InForce | None, str]:
+    """What the robot's runs get here, or why they cannot run (said to whoever starts one)."""
+    try:
+        policy = Policy.from_settings(robot.run_isolation(settings.RUN_ISOLATION))
+        in_force = policy.resolve()
+        for needed in (settings.RUNS_DIR, CLIENTS_DIR):
+            if not in_force.sandbox and (blocked := unreachable_ancestor(needed)):
+                raise IsolationUnavailable(
+                    f"without a sandbox, run accounts reach {needed} through {blocked},"
+                    " which only its owner may enter: move it or install bubblewrap"
+                )
+    except IsolationUnavailable as exc:
+        log.error("robot %s: its programs cannot run: %s", robot.name, exc)
+        return None, str(exc)
+    return in_force, ""
 
 
 class AgentManager:

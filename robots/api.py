@@ -1,21 +1,28 @@
+import re
 from urllib.parse import urlsplit
 
+from django.conf import settings as django_settings
 from django.db import IntegrityError
 from ninja import Field, Router, Schema
 from ninja.errors import HttpError
 from ninja.responses import Status
-from pydantic import field_validator
+from pydantic import field_validator, model_validator
 
 import rhal
+from programs.isolation import IsolationUnavailable, Policy
+from programs.launcher import Limits
 from robots.bus import announce_robot_sync, ask_agent_sync
-from robots.models import Robot, get_robot_for_user
+from robots.models import Robot, get_robot_for_user, robots_for_user
 
 robots_router = Router(tags=["robots"])
+
+# The known driver schemes in the OpenAPI schema; `known_driver` gives the clearer error.
+DRIVER_URL = {"pattern": f"^({'|'.join(re.escape(scheme) for scheme in sorted(rhal.DRIVERS))})://"}
 
 
 class RobotIn(Schema):
     name: str = Field(pattern=r"^[a-zA-Z0-9_-]{1,50}$")
-    url: str = Field(min_length=1, max_length=500)
+    url: str = Field(min_length=1, max_length=500, json_schema_extra=DRIVER_URL)
     settings: dict = {}
     description: str = ""
 
@@ -29,12 +36,28 @@ class RobotIn(Schema):
         return value
 
 
+    @model_validator(mode="after")
+    def usable_settings(self):
+        """Settings a robot's agent could not use are refused now, not found out later."""
+        robot = Robot(name=self.name, url=self.url, settings=self.settings)
+        try:
+            Limits.from_settings(self.settings.get("limits", {}))
+            Policy.from_settings(robot.run_isolation(django_settings.RUN_ISOLATION))
+            rhal.connect(self.url, **robot.driver_options())  # builds it, opens nothing
+        except (TypeError, ValueError, AttributeError, rhal.RhalError) as exc:
+            raise ValueError(f"settings: {exc}") from None
+        except IsolationUnavailable as exc:
+            raise ValueError(f"settings: {exc}") from None
+        return self
+
+
 class RobotOut(Schema):
     name: str
     url: str
     settings: dict
     description: str
     last_seen: str | None = None
+    isolation: str = Field(description="What its agent gives each run, or why runs are refused")
 
     @staticmethod
     def resolve_last_seen(robot):
@@ -43,7 +66,7 @@ class RobotOut(Schema):
 
 @robots_router.get("", response=list[RobotOut])
 def list_robots(request):
-    return Robot.objects.all()
+    return robots_for_user(request.user)
 
 
 @robots_router.post("", response={201: RobotOut, 409: dict})

@@ -1,7 +1,6 @@
 """A robot's live page: sensor readings, values shown by programs, its running programs."""
 
-import base64
-
+from asgiref.sync import sync_to_async
 from channels.db import database_sync_to_async
 from channels.generic.websocket import AsyncWebsocketConsumer
 from django.http import Http404
@@ -10,6 +9,7 @@ from django.template.loader import render_to_string
 from programs.access import runs_for_user
 from programs.models import Run
 from robots.models import get_robot_for_user, robot_group
+from robots.readings import sensor_rows, show_items
 
 
 @database_sync_to_async
@@ -18,25 +18,6 @@ def _get_robot(user, name):
         return get_robot_for_user(user, name)
     except Http404:
         return None
-
-
-def flatten(readings: dict, prefix: str = "") -> list[tuple[str, object]]:
-    rows = []
-    for key, value in readings.items():
-        if isinstance(value, dict):
-            rows.extend(flatten(value, f"{prefix}{key}."))
-        else:
-            rows.append((f"{prefix}{key}", value))
-    return rows
-
-
-def show_item(name: str, entry: dict) -> dict:
-    value = entry["value"]
-    item = {"name": name, "run": entry["run"], "value": value, "svg": None}
-    if isinstance(value, str) and value.lstrip().startswith(("<svg", "<?xml")):
-        # Shown as an image: a browser runs no script from an SVG inside <img>.
-        item["svg"] = "data:image/svg+xml;base64," + base64.b64encode(value.encode()).decode()
-    return item
 
 
 class RobotConsumer(AsyncWebsocketConsumer):
@@ -55,14 +36,21 @@ class RobotConsumer(AsyncWebsocketConsumer):
             await self.channel_layer.group_discard(self.group, self.channel_name)
 
     async def robot_telemetry(self, event):
-        units = event.get("units", {})
-        rows = [(name, value, units.get(name, "")) for name, value in flatten(event["sensors"])]
-        html = render_to_string("robots/_sensors.html", {"rows": rows, "oob": True})
-        if event["shows"]:
-            self.shows.update(event["shows"])
-            items = [show_item(name, entry) for name, entry in sorted(self.shows.items())]
-            html += render_to_string("robots/_shows.html", {"shows": items, "oob": True})
+        shows_changed = bool(event["shows"] or event.get("all_shows"))
+        if event.get("all_shows"):
+            self.shows = {}
+        self.shows.update(event["shows"])
+        # Rendering is CPU work for each viewer, four times a second: off the event loop.
+        html = await sync_to_async(self._render, thread_sensitive=False)(event, shows_changed)
         await self.send(html)
+
+    def _render(self, event: dict, shows_changed: bool) -> str:
+        rows = sensor_rows(event["sensors"], event.get("units", {}))
+        html = render_to_string("robots/_sensors.html", {"rows": rows, "oob": True})
+        if shows_changed:
+            context = {"shows": show_items(self.shows), "oob": True}
+            html += render_to_string("robots/_shows.html", context)
+        return html
 
     async def robot_runs(self, event):
         await self.send(await database_sync_to_async(self._render_runs)())

@@ -2,8 +2,8 @@ from django.db import models
 from django.http import Http404
 from django.utils import timezone
 
-# Robot settings a staff member may set; anything else in `settings` is passed to the driver.
-SPEED_SETTINGS = ("max_linear", "max_angular")
+# Settings for the runs on a robot; anything else in its `settings` goes to its driver.
+RUN_SETTINGS = ("limits", "isolation", "network", "tmp_mb")
 
 
 class Robot(models.Model):
@@ -17,6 +17,9 @@ class Robot(models.Model):
     description = models.CharField(max_length=200, blank=True)
     created = models.DateTimeField(default=timezone.now)
     last_seen = models.DateTimeField(null=True, blank=True, editable=False)
+    isolation = models.CharField(
+        max_length=200, blank=True, editable=False, help_text="What its agent gives each run"
+    )
 
     class Meta:
         ordering = ["name"]
@@ -24,20 +27,15 @@ class Robot(models.Model):
     def __str__(self) -> str:
         return self.name
 
-    @property
-    def agent_channel(self) -> str:
-        return agent_channel(self.name)
-
-    @property
-    def group(self) -> str:
-        return robot_group(self.name)
-
     def driver_options(self) -> dict:
-        """Options for rhal.connect(): the robot's settings minus the run limits."""
-        return {k: v for k, v in self.settings.items() if k != "limits"}
+        """Options for rhal.connect(): the robot's settings but those for its runs."""
+        return {k: v for k, v in self.settings.items() if k not in RUN_SETTINGS}
 
     def run_limits(self, defaults: dict) -> dict:
         return {**defaults, **self.settings.get("limits", {})}
+
+    def run_isolation(self, defaults: dict) -> dict:
+        return {**defaults, **{k: v for k, v in self.settings.items() if k in defaults}}
 
 
 def agent_channel(name: str) -> str:
@@ -48,11 +46,13 @@ def robot_group(name: str) -> str:
     return f"robot-{name}"
 
 
-def get_robot_for_user(user, name: str) -> Robot:
+def robots_for_user(user):
     """Every signed-in user may use every robot (group restrictions come with the lab roles)."""
-    if not user.is_authenticated:
-        raise Http404("No such robot.")
+    return Robot.objects.all() if user.is_authenticated else Robot.objects.none()
+
+
+def get_robot_for_user(user, name: str) -> Robot:
     try:
-        return Robot.objects.get(name=name)
+        return robots_for_user(user).get(name=name)
     except Robot.DoesNotExist:
         raise Http404(f"No robot named {name!r}.") from None

@@ -32,6 +32,13 @@ class RobotApi:
             "show": self.show,
         }
 
+    def quick(self, method: str) -> bool:
+        """Methods that need no task of their own: those that ask the driver nothing it must
+        wait for, on a driver that says its answers come at once (the sim robot)."""
+        if method in ("auth", "capabilities", "show"):
+            return True
+        return method in ("sensors", "sensor", "drive", "stop") and self.agent.driver.quick
+
     async def handle(self, session: Session, method: str, params):
         if method == "auth":
             return self.auth(session, params)
@@ -64,7 +71,7 @@ class RobotApi:
     async def drive(self, active, params):
         linear, angular = bind_params(params, ("linear", "angular"), 1)
         applied = await self.agent.driver.drive(linear, 0.0 if angular is None else angular)
-        active.drove = True
+        self.agent.motion_owner = active.run_id
         return applied
 
     async def stop(self, active, params):

@@ -1,3 +1,5 @@
+import threading
+
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.http import HttpRequest, HttpResponse
@@ -7,26 +9,35 @@ from django.views.decorators.http import require_POST
 from programs.access import get_program_for_user, programs_for_user, runs_for_user
 from programs.models import Run, RunRefused, start_run
 from robots.bus import AgentUnavailable, ask_agent_sync
-from robots.models import Robot, get_robot_for_user
+from robots.models import get_robot_for_user, robots_for_user
+from robots.readings import sensor_rows, show_items
+
+SNAPSHOT_TIMEOUT = 1.0
+CAMERA_ASKS = threading.BoundedSemaphore(2)
 
 
 @login_required
 def robot_list(request: HttpRequest) -> HttpResponse:
-    return render(request, "robots/list.html", {"robots": Robot.objects.all()})
+    return render(request, "robots/list.html", {"robots": robots_for_user(request.user)})
 
 
 @login_required
 def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
     robot = get_robot_for_user(request.user, name)
-    return render(
-        request,
-        "robots/detail.html",
-        {
-            "robot": robot,
-            "running": runs_for_user(request.user).filter(robot=robot, state__in=Run.ACTIVE),
-            "programs": programs_for_user(request.user),
-        },
-    )
+    context = {
+        "robot": robot,
+        "running": runs_for_user(request.user).filter(robot=robot, state__in=Run.ACTIVE),
+        "programs": programs_for_user(request.user),
+    }
+    # The state now, so the page is whole before (or without) its websocket.
+    try:
+        state = ask_agent_sync(robot.name, "robot.state", timeout=SNAPSHOT_TIMEOUT)
+    except AgentUnavailable as exc:
+        context["agent_error"] = str(exc)
+    else:
+        context["rows"] = sensor_rows(state["sensors"], state["units"])
+        context["shows"] = show_items(state["shows"])
+    return render(request, "robots/detail.html", context)
 
 
 @login_required
@@ -60,10 +71,15 @@ def robot_run(request: HttpRequest, name: str) -> HttpResponse:
 @login_required
 def robot_camera(request: HttpRequest, name: str) -> HttpResponse:
     robot = get_robot_for_user(request.user, name)
+    # Each frame holds a web worker while the agent renders it: never all of them.
+    if not CAMERA_ASKS.acquire(blocking=False):
+        return HttpResponse("camera busy; try again", status=503, content_type="text/plain")
     try:
-        jpeg = ask_agent_sync(robot.name, "robot.camera")["jpeg"]
+        jpeg = ask_agent_sync(robot.name, "robot.camera", timeout=SNAPSHOT_TIMEOUT)["jpeg"]
     except AgentUnavailable as exc:
         return HttpResponse(str(exc), status=503, content_type="text/plain")
+    finally:
+        CAMERA_ASKS.release()
     response = HttpResponse(jpeg, content_type="image/jpeg")
     response["Cache-Control"] = "no-store"
     return response

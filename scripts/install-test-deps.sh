@@ -1,18 +1,41 @@
 #!/bin/sh
-# System packages the tests need, from Debian's archive: Chromium for the browser tests,
-# util-linux for the launcher (setpriv, prlimit). Installs only what is missing.
+# What the tests need from the machine, from Debian's archive, installed only when missing:
+# Chromium (browser tests), util-linux (setpriv, prlimit), bubblewrap and nftables (the runs'
+# sandbox and network), PostgreSQL and Redis (fleet mode), started if they are not running.
 set -eu
 need=""
-command -v chromium >/dev/null 2>&1 || need="$need chromium"
-command -v setpriv >/dev/null 2>&1 || need="$need util-linux"
-command -v prlimit >/dev/null 2>&1 || need="$need util-linux"
-command -v python3 >/dev/null 2>&1 || need="$need python3"
+have() { command -v "$1" >/dev/null 2>&1 || [ -x "/usr/sbin/$1" ] || [ -x "/sbin/$1" ]; }
+have chromium || need="$need chromium"
+have setpriv || need="$need util-linux"
+have prlimit || need="$need util-linux"
+have bwrap || need="$need bubblewrap"
+have nft || need="$need nftables"
 [ -x /usr/bin/python3 ] || need="$need python3"
-[ -n "$need" ] || exit 0
-if [ "$(id -u)" -ne 0 ]; then
-    echo "missing system packages:$need (run as root, or install them)" >&2
-    exit 1
+have redis-server || need="$need redis-server"
+have pg_ctlcluster || need="$need postgresql"
+if [ -n "$need" ]; then
+    if [ "$(id -u)" -ne 0 ]; then
+        echo "missing system packages:$need (run as root, or install them)" >&2
+        exit 1
+    fi
+    export DEBIAN_FRONTEND=noninteractive
+    apt-get update -qq
+    apt-get install -y -qq --no-install-recommends $need >/dev/null
 fi
-export DEBIAN_FRONTEND=noninteractive
-apt-get update -qq
-apt-get install -y -qq --no-install-recommends $need >/dev/null
+
+# The services, as this kind of machine starts them, if they are down.
+if ! redis-cli -h 127.0.0.1 ping >/dev/null 2>&1; then
+    mkdir -p /var/lib/redis /var/log/redis
+    redis-server --daemonize yes --bind 127.0.0.1 -::1 --port 6379 --save "" \
+        --appendonly no --dir /var/lib/redis --logfile /var/log/redis/ci.log
+fi
+if ! pg_isready -h 127.0.0.1 -p 5432 >/dev/null 2>&1; then
+    version=$(ls /etc/postgresql | sort -n | tail -1)
+    pg_ctlcluster --skip-systemctl-redirect "$version" main start
+fi
+for i in $(seq 1 30); do
+    redis-cli -h 127.0.0.1 ping >/dev/null 2>&1 && pg_isready -h 127.0.0.1 -p 5432 >/dev/null 2>&1 && exit 0
+    sleep 1
+done
+echo "Redis or PostgreSQL did not come up on 127.0.0.1" >&2
+exit 1

@@ -5,10 +5,8 @@ Split: `robotide up` with REDIS_URL and DATABASE_URL (a fresh PostgreSQL databas
 `robotide agent sim` as its own process.
 """
 
-import json
 import os
 import re
-import shutil
 import signal
 import socket
 import subprocess
@@ -184,11 +182,3 @@ def _redis_db() -> int:
 
 def cookie_header(client: httpx.Client) -> str:
     return "; ".join(f"{k}={v}" for k, v in client.cookies.items())
-
-
-def pretty(obj) -> str:
-    return json.dumps(obj, indent=2)
-
-
-def remove(path: Path) -> None:
-    shutil.rmtree(path, ignore_errors=True)

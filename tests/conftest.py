@@ -5,11 +5,6 @@ import pytest
 from tests.appliance import Appliance
 
 
-def pytest_configure(config):
-    # Nothing is skipped in CI: a missing service or browser is a failure there.
-    config.addinivalue_line("markers", "split: needs PostgreSQL and Redis")
-
-
 @pytest.fixture(autouse=True)
 def _test_settings(settings, tmp_path):
     settings.RUNS_DIR = tmp_path / "runs"

@@ -1,10 +1,16 @@
 """A run whose agent died is marked lost when the agent comes back, and its program is gone."""
 
+import os
+
 import pytest
 
 from tests.appliance import Appliance, wait_for
 
-SOURCE = "import os, time\nprint(os.getpid(), flush=True)\nwhile True: time.sleep(1)\n"
+# A program with a child in the background, which a pdeathsig alone would not end.
+SOURCE = (
+    "import subprocess, time\nsubprocess.Popen(['sleep', '300'])\n"
+    "print('started', flush=True)\nwhile True: time.sleep(1)\n"
+)
 
 
 @pytest.fixture(params=["embedded", "split"])
@@ -17,12 +23,14 @@ def app(request, tmp_path):
 def test_runs_of_a_dead_agent_are_lost_and_their_programs_gone(app):
     program = app.create_program("orphan", SOURCE)
     run = app.wait_run(app.run_program(program["id"])["id"], states=("running",))
-    pid = int(wait_for(lambda: app.api("GET", f"/api/runs/{run['id']}/log").text.split()[0]))
+    wait_for(lambda: "started" in app.api("GET", f"/api/runs/{run['id']}/log").text)
+    pids = processes_of_run(run["id"])
+    assert len(pids) >= 2
     # SIGKILL: the agent gets no chance to clean up.
     victim = app.agent if app.mode == "split" else app.server
     victim.kill()
     victim.wait()
-    wait_for(lambda: not alive(pid), what="the orphaned program to die")
+    wait_for(lambda: not processes_of_run(run["id"]), what="the orphaned programs to die")
     if app.mode == "split":
         app.agent = app._spawn("agent", "sim")
     else:
@@ -35,9 +43,17 @@ def test_runs_of_a_dead_agent_are_lost_and_their_programs_gone(app):
     assert app.wait_run(again["id"])["state"] == "stopped"
 
 
-def alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().split()[2] != "Z"
-    except FileNotFoundError:
-        return False
+def processes_of_run(run_id: int) -> list[int]:
+    """Host pids of the processes whose environment names the run (seen as root)."""
+    found = []
+    for entry in os.scandir("/proc"):
+        if not entry.name.isdigit():
+            continue
+        try:
+            environ = open(f"/proc/{entry.name}/environ", "rb").read().split(b"\0")
+            state = open(f"/proc/{entry.name}/stat").read().split()[2]
+        except OSError:
+            continue
+        if f"ROBOT_RUN_ID={run_id}".encode() in environ and state != "Z":
+            found.append(int(entry.name))
+    return found

@@ -101,3 +101,19 @@ def test_run_on_an_unknown_robot(api):
     program = api("POST", "/api/programs", {"name": "p", "language": "python"}).json()
     response = api("POST", f"/api/programs/{program['id']}/run", {"robot": "ghost"})
     assert response.status_code == 404 and "ghost" in response.json()["detail"]
+
+
+def test_robot_settings_that_cannot_work_are_refused(api, alice):
+    alice.is_staff = True
+    alice.save()
+    for settings in [
+        {"max_linear": "fast"},
+        {"limits": {"cpu_seconds": "lots"}},
+        {"network": "wifi"},
+        {"isolation": "none"},
+        {"wheels": 6},
+    ]:
+        response = api("POST", "/api/robots", {"name": "r4", "url": "sim://", "settings": settings})
+        assert response.status_code == 422, (settings, response.text)
+    ok = api("POST", "/api/robots", {"name": "r4", "url": "sim://", "settings": {"network": "none"}})
+    assert ok.status_code == 201

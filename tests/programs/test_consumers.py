@@ -120,3 +120,34 @@ async def test_a_late_viewer_is_told_exactly_how_many_lines_it_missed():
     html = await comm.receive_from()
     assert "… 5 line(s) not shown live" in html and '<div class="ln o">15</div>' in html
     await comm.disconnect()
+
+
+async def test_a_page_rendered_with_the_log_gets_only_what_came_after():
+    alice, _, run = await make_run(b"o one\no two\n")
+    shown = len(b"o one\no two\n")
+    with open(run.log_path, "ab") as f:
+        f.write(b"e three\no four\no unfini")
+    path = f"/ws/runs/{run.pk}/?from={shown}"
+    comm = communicator(RunConsumer, path, alice, run_id=run.pk)
+    comm.scope["query_string"] = f"from={shown}".encode()
+    assert (await comm.connect())[0]
+    assert await comm.receive_from() == (
+        '<div id="log-lines" hx-swap-oob="beforeend">'
+        '<div class="ln e">three</div><div class="ln o">four</div></div>'
+    )
+    await comm.disconnect()
+
+
+async def test_the_run_list_keeps_what_staff_see_and_where_stop_returns():
+    alice, _, run = await make_run(b"")
+    staff = await database_sync_to_async(User.objects.create_user)("teacher", is_staff=True)
+    comm = communicator(RunListConsumer, "/ws/runs/", staff)
+    comm.scope["query_string"] = b"robot=sim"
+    assert (await comm.connect())[0]
+    await get_channel_layer().group_send(
+        RUNS_GROUP, {"type": "runs.changed", "run_id": run.pk, "robot": "sim"}
+    )
+    html = await comm.receive_from(timeout=3)
+    assert "<th>User</th>" in html and f"#{run.pk}" in html
+    assert 'name="next" value="/runs/?robot=sim"' in html
+    await comm.disconnect()

@@ -101,11 +101,9 @@ async def test_a_program_that_ignores_sigterm_is_killed_after_the_grace_period(t
     )
     process, collector = await run(tmp_path, source, grace=0.5)
     await wait_until(lambda: collector.lines)
-    started = time.monotonic()
     process.stop()
     outcome = await asyncio.wait_for(process.wait(), 10)
     assert outcome.state == "stopped" and outcome.exit_code == -signal.SIGKILL
-    assert 0.4 < time.monotonic() - started < 5
     assert any("sending SIGKILL" in text for _, text in log_lines(tmp_path))
 
 

@@ -102,7 +102,7 @@ async def test_drive_is_clamped_to_the_robot_limits(agent, conn):
     await conn.call("auth", "good-token")
     reply = await conn.call("drive", 5.0, 0.0)
     assert reply["result"] == {"linear": 0.5, "angular": 0.0}
-    assert active.drove
+    assert agent.motion_owner == active.run_id
     await asyncio.sleep(0.2)
     assert (await conn.call("sensors"))["result"]["velocity"]["linear"] == 0.5
 

@@ -77,3 +77,31 @@ async def test_closing_the_server_while_a_handler_waits(server):
     await asyncio.sleep(0.05)
     await asyncio.wait_for(server.close(), 5)
     assert await reader.read() == b""
+
+
+async def test_handlers_that_are_not_quick_run_in_a_task_and_may_use_timeouts():
+    async def timed(session, method, params):
+        async with asyncio.timeout(1):  # needs a task of its own
+            await asyncio.sleep(0)
+            return "in time"
+
+    for quick in (None, lambda method: method == "other"):
+        server = RobotApiServer(timed, quick=quick)
+        await server.start()
+        reader, writer = await open_client(server)
+        writer.write((request(1, "timed") + "\n").encode())
+        assert json.loads(await reader.readline())["result"] == "in time"
+        writer.close()
+        await server.close()
+
+
+async def test_quick_methods_are_answered_in_order_with_slow_ones():
+    server = RobotApiServer(handler, quick=lambda method: method == "echo")
+    await server.start()
+    reader, writer = await open_client(server)
+    calls = [("echo", 1), ("wait", 0.02), ("echo", 2), ("yield",)]
+    writer.write("".join(request(i, *c) + "\n" for i, c in enumerate(calls)).encode())
+    replies = [json.loads(await reader.readline()) for _ in calls]
+    assert [r["id"] for r in replies] == [0, 1, 2, 3]
+    writer.close()
+    await server.close()

@@ -1,0 +1,210 @@
+"""Web security that Django and django-csp leave to the project (settings: "Web security").
+
+- ``CSPMiddleware``: django-csp's, with this host's websocket origin added to connect-src.
+- ``RequestSizeLimitMiddleware``: a request body over ``MAX_REQUEST_BYTES`` gets 413 unread.
+- ``SameOriginWebsocket``: a websocket handshake from another origin's page is refused (the
+  session cookie would otherwise let any page, even a program's web server on another port of
+  this host, read the user's live streams).
+- Login throttling: failed sign-ins are counted per (user name, address) pair and per address
+  in the cache; while either is locked, ``ThrottledModelBackend`` refuses every sign-in (a right
+  password too) and ``ThrottledLoginMixin`` tells the user how long to wait.
+"""
+
+import hashlib
+import math
+import time
+from urllib.parse import urlsplit
+
+import csp.middleware
+from channels.security.websocket import OriginValidator
+from django import forms
+from django.conf import settings
+from django.contrib.admin.forms import AdminAuthenticationForm
+from django.contrib.auth import get_user_model
+from django.contrib.auth.backends import ModelBackend
+from django.contrib.auth.forms import AuthenticationForm
+from django.contrib.auth.signals import user_login_failed
+from django.core.cache import cache
+from django.core.exceptions import DisallowedHost, PermissionDenied
+from django.dispatch import receiver
+from django.http import HttpResponse, JsonResponse
+
+# -- Content Security Policy ----------------------------------------------------------------------
+
+
+class CSPMiddleware(csp.middleware.CSPMiddleware):
+    def get_policy_parts(self, request, response, report_only=False):
+        parts = super().get_policy_parts(request, response, report_only)
+        try:
+            host = request.get_host()
+        except DisallowedHost:
+            return parts
+        # CSP 3 lets 'self' match ws:/wss: of the page's host; older browsers need it spelled out.
+        scheme = "wss" if request.is_secure() else "ws"
+        update = dict(parts.update or {})
+        update["connect-src"] = [*update.get("connect-src", ()), f"{scheme}://{host}"]
+        parts.update = update
+        return parts
+
+
+# -- Websockets -----------------------------------------------------------------------------------
+
+
+class SameOriginWebsocket(OriginValidator):
+    """Lets a browser's websocket in only from a page of this origin or CSRF_TRUSTED_ORIGINS.
+
+    A handshake without Origin is not a browser's (browsers always send it): it is let through,
+    as Django's CSRF check lets through a form post without Origin.
+    """
+
+    def __init__(self, application):
+        super().__init__(application, settings.CSRF_TRUSTED_ORIGINS)
+
+    async def __call__(self, scope, receive, send):
+        headers = dict(scope.get("headers", []))
+        origin, host = headers.get(b"origin"), headers.get(b"host")
+        if origin is None or (host is not None and urlsplit(origin).netloc == host):
+            return await self.application(scope, receive, send)
+        return await super().__call__(scope, receive, send)
+
+
+# -- Request size ---------------------------------------------------------------------------------
+
+
+class RequestSizeLimitMiddleware:
+    """Refuses an over-size body from its Content-Length, before anything reads it.
+
+    Django limits form fields (DATA_UPLOAD_MAX_MEMORY_SIZE) but streams any size of uploaded file
+    to disk; this caps the whole request.
+    """
+
+    def __init__(self, get_response):
+        self.get_response = get_response
+
+    def __call__(self, request):
+        try:
+            length = int(request.META.get("CONTENT_LENGTH") or 0)
+        except ValueError:
+            length = 0
+        if length > settings.MAX_REQUEST_BYTES:
+            return request_too_large(request)
+        return self.get_response(request)
+
+
+def request_too_large(request) -> HttpResponse:
+    from programs.models import MAX_SOURCE_BYTES
+
+    detail = (
+        f"Request too large: at most {settings.MAX_REQUEST_BYTES // 1024} KB "
+        f"(a program may be {MAX_SOURCE_BYTES // 1024} KB)."
+    )
+    if request.path.startswith("/api/"):
+        response = JsonResponse({"detail": detail}, status=413)
+    else:
+        response = HttpResponse(detail, status=413, content_type="text/plain; charset=utf-8")
+    # The body is left unread: the connection cannot carry another request.
+    response["Connection"] = "close"
+    return response
+
+
+# -- Login throttling -----------------------------------------------------------------------------
+
+
+def _address(request) -> str:
+    # uvicorn has already put a trusted proxy's X-Forwarded-For here (FORWARDED_ALLOW_IPS).
+    return request.META.get("REMOTE_ADDR", "") if request is not None else ""
+
+
+def _keys(request, username: str) -> list[tuple[str, str, int]]:
+    """(counter key, lock key, failures allowed) for the pair and for the address."""
+    limits = settings.LOGIN_THROTTLE
+    address = _address(request)
+    pair = hashlib.sha256(f"{(username or '').casefold()}\0{address}".encode()).hexdigest()
+    by_address = "a" + hashlib.sha256(address.encode()).hexdigest()
+    return [
+        (f"login-failures:{pair}", f"login-lock:{pair}", limits["failures"]),
+        (f"login-failures:{by_address}", f"login-lock:{by_address}", limits["address_failures"]),
+    ]
+
+
+def locked_for(request, username: str) -> int:
+    """Seconds until this user name may sign in again from this address (0: it may now)."""
+    locks = cache.get_many([lock for _, lock, _ in _keys(request, username)])
+    until = max(locks.values(), default=0)
+    return max(0, math.ceil(until - time.time()))
+
+
+def record_failure(request, username: str) -> None:
+    limits = settings.LOGIN_THROTTLE
+    window, lock_seconds = limits["window_seconds"], limits["lock_seconds"]
+    for counter, lock, allowed in _keys(request, username):
+        # A counter's window starts at its first failure.
+        cache.add(counter, 0, timeout=window)
+        try:
+            failures = cache.incr(counter)
+        except ValueError:  # expired between add and incr
+            cache.set(counter, 1, timeout=window)
+            failures = 1
+        if failures >= allowed:
+            cache.set(lock, time.time() + lock_seconds, timeout=lock_seconds)
+            cache.delete(counter)
+
+
+def clear_failures(request, username: str) -> None:
+    """A right password forgives the pair's failures, not the address's."""
+    counter, _, _ = _keys(request, username)[0]
+    cache.delete(counter)
+
+
+def _username(credentials: dict) -> str:
+    return credentials.get(get_user_model().USERNAME_FIELD) or credentials.get("username") or ""
+
+
+@receiver(user_login_failed)
+def _count_failed_login(sender, credentials, request=None, **kwargs):
+    # Every password check that fails (sign-in page, admin) comes through here; refusals while
+    # locked do too, and do not prolong the lock.
+    if request is None:
+        return
+    username = _username(credentials)
+    if not locked_for(request, username):
+        record_failure(request, username)
+
+
+class ThrottledModelBackend(ModelBackend):
+    def authenticate(self, request, username=None, password=None, **kwargs):
+        if username is None:
+            username = kwargs.get(get_user_model().USERNAME_FIELD)
+        if request is not None and locked_for(request, username):
+            raise PermissionDenied("too many failed sign-ins")  # no other backend is tried
+        user = super().authenticate(request, username=username, password=password, **kwargs)
+        if user is not None and request is not None:
+            clear_failures(request, username)
+        return user
+
+
+def throttled_message(seconds: int) -> str:
+    if seconds < 60:
+        wait = f"{seconds} second{'s' if seconds != 1 else ''}"
+    else:
+        minutes = math.ceil(seconds / 60)
+        wait = f"{minutes} minute{'s' if minutes != 1 else ''}"
+    return f"Too many failed sign-ins; try again in {wait}."
+
+
+class ThrottledLoginMixin:
+    """For AuthenticationForm and its subclasses: says so when the sign-in is locked."""
+
+    def get_invalid_login_error(self):
+        wait = locked_for(self.request, self.cleaned_data.get("username") or "")
+        if wait:
+            return forms.ValidationError(throttled_message(wait), code="throttled")
+        return super().get_invalid_login_error()
+
+
+class LoginForm(ThrottledLoginMixin, AuthenticationForm):
+    pass
+
+
+class AdminLoginForm(ThrottledLoginMixin, AdminAuthenticationForm):
+    pass

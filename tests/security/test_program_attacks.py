@@ -1,0 +1,293 @@
+"""Programs that attack: none may harm the server, another run or the robot's owner.
+
+Each runs on a real appliance through the API like a student's program, its outcome is
+asserted from its log and state, and the server is checked to keep serving meanwhile.
+"""
+
+import json
+import shutil
+import socket
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+from programs.watch import processes_of
+from tests.appliance import Appliance, wait_for
+
+LIMITS = {"wall_seconds": 4, "log_size_mb": 1, "processes": 32, "memory_mb": 200,
+          "open_files": 64, "disk_mb": 8, "cpu_seconds": 3}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def app(tmp_path_factory):
+    # Not under /tmp/pytest-of-root (0700): without a sandbox, run accounts walk the real path.
+    app = Appliance(tmp_path_factory.mktemp("attacks")).start()
+    for name, network in [("jail", "none"), ("lab", "loopback")]:
+        body = {"name": name, "url": "sim://", "settings": {"limits": LIMITS, "network": network}}
+        assert app.api("POST", "/api/robots", body).status_code == 201
+        wait_for(lambda n=name: app.api("GET", f"/api/robots/{n}/sensors").status_code == 200)
+    app.bystander = app.new_user("bystander")
+    yield app
+    app.stop()
+
+
+def attack(app, source, robot="jail", language="python", timeout=30):
+    """Run `source` as a user's program; check the server serves others meanwhile."""
+    name = f"attack {time.monotonic_ns()}"
+    program = app.create_program(name, source, language=language)
+    run_id = app.run_program(program["id"], robot=robot)["id"]
+    assert_serving(app)
+    run = app.wait_run(run_id, timeout=timeout)
+    assert_serving(app)
+    log = app.api("GET", f"/api/runs/{run_id}/log").text
+    return run, log
+
+
+def assert_serving(app):
+    started = time.monotonic()
+    response = app.api("GET", "/api/programs", token=app.bystander)
+    assert response.status_code == 200 and time.monotonic() - started < 5
+
+
+def test_the_robot_page_and_admin_say_which_isolation_is_in_force(app):
+    robots = {r["name"]: r for r in app.api("GET", "/api/robots").json()}
+    assert "sandbox (bubblewrap)" in robots["jail"]["isolation"]
+    assert "network none" in robots["jail"]["isolation"]
+    page = app.session().get("/robots/jail/").text
+    assert "sandbox (bubblewrap)" in page
+
+
+def test_it_cannot_read_the_database_or_the_secret_key(app):
+    data = app.data_dir
+    source = f"""
+import os
+print("uid", os.getuid())
+for path in [{str(data / "robotide.sqlite3")!r}, {str(data / "secret_key")!r}]:
+    try:
+        print("READ", path, open(path, "rb").read(16))
+    except OSError as e:
+        print("DENIED", path, type(e).__name__)
+"""
+    run, log = attack(app, source)
+    assert run["state"] == "finished", log
+    assert log.count("DENIED") == 2 and "READ" not in log
+    assert (data / "secret_key").read_text().strip() not in log
+    assert "uid 0" not in log
+
+
+def test_it_cannot_see_other_runs_or_the_data_folder(app):
+    first, _ = attack(app, "print('a run with files')\nopen('notes.txt', 'w').write('private')\n")
+    runs = app.data_dir / "runs"
+    source = f"""
+import os
+for path in [{str(runs)!r}, {str(runs / str(first["id"]) / "work")!r}, {str(app.data_dir)!r}]:
+    try:
+        print("LISTED", path, os.listdir(path))
+    except OSError as e:
+        print("DENIED", path, type(e).__name__)
+try:
+    print("READ", open({str(runs / str(first["id"]) / "work" / "notes.txt")!r}).read())
+except OSError as e:
+    print("DENIED notes", type(e).__name__)
+"""
+    run, log = attack(app, source)
+    assert log.count("DENIED") == 4, log
+    assert "private" not in log
+
+
+def test_it_cannot_write_outside_its_folder(app):
+    source = f"""
+import os
+for path in ["/usr/evil", "/etc/evil", {str(app.data_dir / "evil")!r}, "/root/evil"]:
+    try:
+        open(path, "w").write("x")
+        print("WROTE", path)
+    except OSError as e:
+        print("DENIED", path, type(e).__name__)
+open("mine.txt", "w").write("ok")
+open("/tmp/scratch", "w").write("private tmp")
+print("own folder and /tmp ok")
+"""
+    run, log = attack(app, source)
+    assert "WROTE" not in log and log.count("DENIED") == 4, log
+    assert "own folder and /tmp ok" in log
+    assert not (app.data_dir / "evil").exists()
+
+
+def test_a_fork_bomb_is_contained(app):
+    source = (
+        "import os\nwhile True:\n    try:\n        os.fork()\n    except OSError:\n        pass\n"
+    )
+    run, log = attack(app, source)
+    assert run["state"] == "failed"
+    assert "process limit (32 processes)" in log or "wall-clock" in log, log
+
+
+def test_allocating_without_end_hits_the_memory_limit(app):
+    source = "chunks = []\nwhile True:\n    chunks.append(bytearray(10 * 1024 * 1024))\n"
+    run, log = attack(app, source)
+    assert run["state"] == "failed" and "MemoryError" in log
+    assert "memory limit (200 MB)" in log, log
+
+
+def test_printing_without_end_hits_the_output_limit(app):
+    run, log = attack(app, "while True:\n    print('flood ' * 20)\n")
+    assert run["state"] == "failed" and "output size limit (1 MB) reached" in log
+
+
+def test_sleeping_forever_hits_the_wall_clock_limit(app):
+    run, log = attack(app, "import time\ntime.sleep(10**6)\n")
+    assert run["state"] == "failed" and "wall-clock time limit (4 s) reached" in log
+
+
+def test_spinning_hits_the_cpu_limit(app):
+    run, log = attack(app, "while True:\n    pass\n")
+    assert run["state"] == "failed" and "CPU time limit reached" in log
+
+
+def test_opening_thousands_of_files_hits_the_limit(app):
+    source = (
+        "files = []\ntry:\n    while True:\n        files.append(open('/dev/null'))\n"
+        "except OSError as e:\n    print('stopped at', len(files), e)\n    raise\n"
+    )
+    run, log = attack(app, source)
+    assert run["state"] == "failed" and "Too many open files" in log
+    assert "open files limit (64)" in log
+
+
+def test_filling_the_disk_hits_the_disk_limit(app):
+    source = (
+        "import time\nwith open('big', 'wb') as f:\n    while True:\n"
+        "        f.write(b'x' * 1024 * 1024)\n        f.flush()\n        time.sleep(0.05)\n"
+    )
+    run, log = attack(app, source)
+    assert run["state"] == "failed" and "disk limit (8 MB written) reached" in log
+
+
+def test_without_network_it_cannot_connect_anywhere(app):
+    source = f"""
+import socket
+for host, port in [("127.0.0.1", {app.port}), ("::1", {app.port})]:
+    try:
+        socket.create_connection((host, port), timeout=2)
+        print("CONNECTED", host)
+    except OSError as e:
+        print("REFUSED", host, type(e).__name__)
+import robot
+print("robot api", robot.Robot().sensors()["range"])
+"""
+    run, log = attack(app, source)
+    assert log.count("REFUSED") == 2 and "CONNECTED" not in log
+    assert "robot api 2.0" in log or "robot api" in log  # the Robot API still works
+
+
+def test_loopback_network_reaches_this_machine_only(app):
+    source = f"""
+import socket
+s = socket.create_connection(("127.0.0.1", {app.port}), timeout=2)
+print("LOOPBACK OK")
+"""
+    run, log = attack(app, source, robot="lab")
+    assert run["state"] == "finished" and "LOOPBACK OK" in log, log
+
+
+def test_one_run_cannot_reach_another(app):
+    victim = app.create_program("victim", "import os, time\nprint('pid', os.getpid(), flush=True)\n"
+                                          "time.sleep(60)\n")  # fmt: skip
+    victim_run = app.run_program(victim["id"], robot="jail")["id"]
+    wait_for(lambda: "pid" in app.api("GET", f"/api/runs/{victim_run}/log").text)
+    source = """
+import os, signal
+mine = os.getpid()
+others = [p for p in os.listdir('/proc') if p.isdigit() and int(p) not in (1, mine)]
+print('OTHERS', others)
+for pid in range(2, 4000):
+    if pid == mine:
+        continue
+    try:
+        os.kill(pid, signal.SIGKILL)
+        print('KILLED', pid)
+    except OSError:
+        pass
+"""
+    run, log = attack(app, source)
+    assert "KILLED" not in log
+    assert app.api("GET", f"/api/runs/{victim_run}").json()["state"] == "running"
+    app.api("POST", f"/api/runs/{victim_run}/stop")
+    assert app.wait_run(victim_run)["state"] == "stopped"
+
+
+def test_a_token_is_worthless_after_its_run(app):
+    source = "import os\nprint(os.environ['ROBOT_API_TCP'], os.environ['ROBOT_TOKEN'])\n"
+    run, log = attack(app, source)
+    address, token = log.split()[0], log.split()[1]
+    host, port = address.rsplit(":", 1)
+    with socket.create_connection((host, int(port))) as sock:
+        request = {"jsonrpc": "2.0", "id": 1, "method": "auth", "params": [token]}
+        sock.sendall(json.dumps(request).encode() + b"\n")
+        reply = json.loads(sock.makefile().readline())
+    assert reply["error"]["code"] == -32001
+
+
+def test_markup_in_output_and_shown_values_stays_text(app):
+    source = (
+        "import robot\nprint('<script>alert(1)</script><b>bold</b>')\n"
+        "robot.Robot().show('x', '<img src=x onerror=alert(1)>')\n"
+    )
+    run, _ = attack(app, source)
+    client = app.session()
+    page = client.get(f"/runs/{run['id']}/").text
+    assert "<script>alert(1)</script>" not in page and "&lt;script&gt;alert(1)" in page
+    assert "<b>bold</b>" not in page
+
+
+@pytest.fixture(scope="module")
+def account_app():
+    """Runs in their own accounts without a sandbox, in a data folder others may pass."""
+    data = Path(tempfile.mkdtemp(prefix="robotide-account-", dir="/tmp"))
+    app = Appliance(data, extra_env={"ROBOTIDE_RUN_ISOLATION": "account"}).start()
+    yield app
+    app.stop()
+    shutil.rmtree(data, ignore_errors=True)
+
+
+def test_without_a_sandbox_runs_still_get_their_own_account(account_app):
+    app = account_app
+    robot = app.api("GET", "/api/robots/sim").json()
+    assert robot["isolation"].startswith("own account, shared filesystem")
+    first, _ = attack_as(app, "open('notes.txt', 'w').write('private')\n")
+    source = f"""
+import os, subprocess
+print("uid", os.getuid())
+for path in [{str(app.data_dir / "secret_key")!r}, {str(app.data_dir / "robotide.sqlite3")!r},
+             {str(app.data_dir / "runs" / str(first["id"]) / "work" / "notes.txt")!r}]:
+    try:
+        print("READ", open(path).read(10))
+    except OSError as e:
+        print("DENIED", type(e).__name__)
+subprocess.Popen(["sleep", "300"])  # left behind: must end with the run
+"""
+    run, log = attack_as(app, source)
+    assert log.count("DENIED") == 3 and "READ" not in log and "uid 0" not in log, log
+    uid = int(log.split()[1])
+    wait_for(lambda: not processes_of(uid), what="the run's leftover process to end")
+
+
+def test_a_robot_whose_isolation_cannot_be_had_refuses_runs(app):
+    # The data folder of `app` is under /tmp/pytest-of-root (0700): no account can pass it.
+    body = {"name": "bare", "url": "sim://", "settings": {"isolation": "account"}}
+    assert app.api("POST", "/api/robots", body).status_code == 201
+    wait_for(lambda: app.api("GET", "/api/robots/bare").json()["isolation"])
+    robot = app.api("GET", "/api/robots/bare").json()
+    assert "which only its owner may enter" in robot["isolation"]
+    run, log = attack(app, "print('must not run')\n", robot="bare")
+    assert run["state"] == "failed" and "must not run" not in log
+    assert "could not start" in run["reason"] and "only its owner may enter" in run["reason"]
+
+
+def attack_as(app, source):
+    program = app.create_program(f"a {time.monotonic_ns()}", source)
+    run = app.wait_run(app.run_program(program["id"])["id"])
+    return run, app.api("GET", f"/api/runs/{run['id']}/log").text
