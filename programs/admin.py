@@ -1,6 +1,6 @@
 from django.contrib import admin
 
-from programs.models import Program, Revision, Run, request_stop
+from programs.models import AgentUnreachable, Program, Revision, Run, request_stop
 
 
 class RevisionInline(admin.TabularInline):
@@ -47,5 +47,8 @@ class RunAdmin(admin.ModelAdmin):
     def stop_runs(self, request, queryset):
         runs = [run for run in queryset.select_related("robot") if run.active]
         for run in runs:
-            request_stop(run)
+            try:
+                request_stop(run)
+            except AgentUnreachable as exc:
+                self.message_user(request, str(exc), level="error")
         self.message_user(request, f"Asked {len(runs)} run(s) to stop.")

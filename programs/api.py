@@ -146,7 +146,7 @@ def delete_program(request, program_id: int):
     return Status(204, None)
 
 
-@programs_router.post("/{int:program_id}/run", response={201: RunOut})
+@programs_router.post("/{int:program_id}/run", response={201: RunOut, 409: Error, 503: Error})
 def run_program(request, program_id: int, data: RunIn):
     program = get_program_for_user(request.user, program_id)
     robot = get_robot_for_user(request.user, data.robot)

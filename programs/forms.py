@@ -72,7 +72,7 @@ def unique_name(owner, name: str) -> str:
 
 def free_name(owner, name: str) -> str:
     """`name`, or `name (2)`, `name (3)`... whichever the owner does not have yet."""
-    name = name[:MAX_NAME - 8]  # room for " (9999)" within the name's length
+    name = name[: MAX_NAME - 8]  # room for " (9999)" within the name's length
     taken = set(
         Program.objects.filter(owner=owner, name__startswith=name).values_list("name", flat=True)
     )

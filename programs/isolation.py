@@ -1,7 +1,7 @@
 """How a run is kept apart from the server, the other runs and the network.
 
 Every run gets an OS account of its own: a numeric user and group id, never the server's,
-derived from the run's id (unique across agents sharing a machine). Where bubblewrap is
+derived from the run's id and its robotide's data folder. Where bubblewrap is
 installed the run also sees only its own filesystem: the language runtimes (/usr, /etc), the
 Robot API clients and socket, its working directory and a private /tmp; nothing of the data
 directory. The network a run may use is part of its id range, so one static nftables table
@@ -19,6 +19,7 @@ message saying what to install or change; nothing falls back to running unconfin
 import os
 import shutil
 import subprocess
+import zlib
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -29,6 +30,7 @@ ISOLATIONS = ("auto", "sandbox", "account")
 NETWORKS = ("none", "loopback", "full")
 UID_BASE = {"none": 1_000_000_000, "loopback": 1_100_000_000, "full": 1_200_000_000}
 UIDS_PER_NETWORK = 100_000_000
+SLOTS, RUNS_PER_SLOT = 1000, 100_000
 NFT_TABLE = "robotide"
 # The server's tools may live in sbin; programs' PATH (SYSTEM_PATH) has no need of it.
 TOOLS_PATH = f"/usr/local/sbin:/usr/sbin:/sbin:{SYSTEM_PATH}"
@@ -108,8 +110,8 @@ class InForce:
     def clients(self) -> Path:
         return self.CLIENTS if self.sandbox else CLIENTS_DIR
 
-    def uid(self, run_id: int) -> int:
-        return UID_BASE[self.network] + run_id % UIDS_PER_NETWORK
+    def uid(self, run_id: int, instance: str) -> int:
+        return run_uid(self.network, run_id, instance)
 
     def wrap(self, argv: list[str], uid: int, workdir: Path, socket_dir: Path) -> list[str]:
         """The command with its account switch and, if any, its sandbox around it.
@@ -148,6 +150,13 @@ class InForce:
         if self.network == "none":
             args.append("--unshare-net")
         return args
+
+
+def run_uid(network: str, run_id: int, instance: str) -> int:
+    """The run's account id. Run ids are unique within one robotide (one database, one data
+    folder); another robotide on the same machine gets another slice of the range."""
+    slot = zlib.crc32(instance.encode()) % SLOTS
+    return UID_BASE[network] + slot * RUNS_PER_SLOT + run_id % RUNS_PER_SLOT
 
 
 def tool(name: str) -> str:

@@ -157,9 +157,10 @@ class Run(models.Model):
     @classmethod
     def claim(cls, run_id: int) -> bool:
         """The agent takes a run that waits to start; False if it no longer waits."""
-        return cls.objects.filter(pk=run_id, state=cls.State.STARTING, pid__isnull=True).update(
-            pid=0
-        ) == 1
+        return (
+            cls.objects.filter(pk=run_id, state=cls.State.STARTING, pid__isnull=True).update(pid=0)
+            == 1
+        )
 
     @classmethod
     def mark_ended(cls, run_id: int, state: str, exit_code: int | None, reason: str) -> None:
@@ -228,8 +229,18 @@ def request_stop(run: Run) -> None:
     from robots.bus import tell_agent_sync
 
     if run.active:
-        tell_agent_sync(run.robot.name, "run.stop", run_id=run.pk)
+        try:
+            tell_agent_sync(run.robot.name, "run.stop", run_id=run.pk)
+        except Exception as exc:  # ChannelFull, or the channel layer away
+            raise AgentUnreachable(
+                f"the agent of robot {run.robot.name!r} cannot be reached to stop it"
+                f" ({type(exc).__name__}); the emergency stop or its agent's restart will"
+            ) from exc
 
 
 class RunRefused(Exception):
+    pass
+
+
+class AgentUnreachable(Exception):
     pass

@@ -11,7 +11,7 @@ from django.views.decorators.http import require_POST
 from programs.access import get_program_for_user, get_run_for_user, programs_for_user, runs_for_user
 from programs.forms import EditProgramForm, NewProgramForm, UploadForm, unique_name
 from programs.languages import get_language
-from programs.models import Program, Run, RunRefused, request_stop, start_run
+from programs.models import AgentUnreachable, Program, Run, RunRefused, request_stop, start_run
 from programs.runlog import plain_text, render_lines, tail
 from robots.models import get_robot_for_user, robots_for_user
 
@@ -242,10 +242,16 @@ def run_log(request: HttpRequest, run_id: int) -> HttpResponse:
 @require_POST
 def run_stop(request: HttpRequest, run_id: int) -> HttpResponse:
     run = get_run_for_user(request.user, run_id)
-    request_stop(run)
-    if request.htmx:
-        return HttpResponse(status=204)
-    messages.info(request, f"Stopping run {run.pk}.")
+    try:
+        request_stop(run)
+    except AgentUnreachable as exc:
+        if request.htmx:
+            return HttpResponse(str(exc), status=503)
+        messages.error(request, str(exc))
+    else:
+        if request.htmx:
+            return HttpResponse(status=204)
+        messages.info(request, f"Stopping run {run.pk}.")
     next_url = request.POST.get("next", "")
     if url_has_allowed_host_and_scheme(next_url, allowed_hosts={request.get_host()}):
         return redirect(next_url)

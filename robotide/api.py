@@ -10,7 +10,7 @@ from ninja.errors import AuthenticationError, HttpError
 from ninja.security import HttpBearer, django_auth
 
 from programs.api import programs_router, runs_router
-from programs.models import RunRefused
+from programs.models import AgentUnreachable, RunRefused
 from robotide.models import ApiToken
 from robots.api import robots_router
 from robots.bus import AgentUnavailable
@@ -100,6 +100,7 @@ def unauthorized(request, exc):
 
 
 @api.exception_handler(AgentUnavailable)
+@api.exception_handler(AgentUnreachable)
 def agent_unavailable(request, exc):
     return api.create_response(request, {"detail": str(exc)}, status=503)
 

@@ -108,6 +108,8 @@ def ensure_sim_robot() -> None:
 
 
 async def serve(host: str, port: int, with_agents: bool) -> None:
+    from django.conf import settings
+
     from robots import bus
     from robots.agent import AgentManager
 
@@ -119,6 +121,9 @@ async def serve(host: str, port: int, with_agents: bool) -> None:
         ws="websockets-sansio",
         log_level="warning",
         access_log=False,
+        # Forwarded-for headers only from a proxy we are told of: a local program could
+        # otherwise pose as any address (and dodge the sign-in throttle).
+        proxy_headers=settings.BEHIND_PROXY,
     )
     server = _Server(config)
     bus.serve_on(asyncio.get_running_loop())

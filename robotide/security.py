@@ -1,7 +1,8 @@
 """Web security that Django and django-csp leave to the project (settings: "Web security").
 
 - ``CSPMiddleware``: django-csp's, with this host's websocket origin added to connect-src.
-- ``RequestSizeLimitMiddleware``: a request body over ``MAX_REQUEST_BYTES`` gets 413 unread.
+- ``RequestSizeLimitMiddleware``: a request body over ``MAX_REQUEST_BYTES`` gets 413 unread;
+  ``bad_request`` says which limit a body broke that Django refused while reading it.
 - ``SameOriginWebsocket``: a websocket handshake from another origin's page is refused (the
   session cookie would otherwise let any page, even a program's web server on another port of
   this host, read the user's live streams).
@@ -11,6 +12,7 @@
 """
 
 import hashlib
+import ipaddress
 import math
 import time
 from urllib.parse import urlsplit
@@ -25,9 +27,16 @@ from django.contrib.auth.backends import ModelBackend
 from django.contrib.auth.forms import AuthenticationForm
 from django.contrib.auth.signals import user_login_failed
 from django.core.cache import cache
-from django.core.exceptions import DisallowedHost, PermissionDenied
+from django.core.exceptions import (
+    DisallowedHost,
+    PermissionDenied,
+    RequestDataTooBig,
+    TooManyFieldsSent,
+    TooManyFilesSent,
+)
 from django.dispatch import receiver
 from django.http import HttpResponse, JsonResponse
+from django.views import defaults
 
 # -- Content Security Policy ----------------------------------------------------------------------
 
@@ -98,13 +107,26 @@ def request_too_large(request) -> HttpResponse:
         f"Request too large: at most {settings.MAX_REQUEST_BYTES // 1024} KB "
         f"(a program may be {MAX_SOURCE_BYTES // 1024} KB)."
     )
+    return _refusal(request, detail, 413)
+
+
+def bad_request(request, exception):
+    """Django's 400 page, or what was too much when a body was too large to read."""
+    limits = {
+        RequestDataTooBig: f"form data over {settings.DATA_UPLOAD_MAX_MEMORY_SIZE // 1024} KB",
+        TooManyFieldsSent: f"more than {settings.DATA_UPLOAD_MAX_NUMBER_FIELDS} fields",
+        TooManyFilesSent: f"more than {settings.DATA_UPLOAD_MAX_NUMBER_FILES} files",
+    }
+    for kind, what in limits.items():
+        if isinstance(exception, kind):
+            return _refusal(request, f"Request refused: {what}.", 400)
+    return defaults.bad_request(request, exception)
+
+
+def _refusal(request, detail: str, status: int) -> HttpResponse:
     if request.path.startswith("/api/"):
-        response = JsonResponse({"detail": detail}, status=413)
-    else:
-        response = HttpResponse(detail, status=413, content_type="text/plain; charset=utf-8")
-    # The body is left unread: the connection cannot carry another request.
-    response["Connection"] = "close"
-    return response
+        return JsonResponse({"detail": detail}, status=status)
+    return HttpResponse(detail, status=status, content_type="text/plain; charset=utf-8")
 
 
 # -- Login throttling -----------------------------------------------------------------------------
@@ -112,7 +134,17 @@ def request_too_large(request) -> HttpResponse:
 
 def _address(request) -> str:
     # uvicorn has already put a trusted proxy's X-Forwarded-For here (FORWARDED_ALLOW_IPS).
-    return request.META.get("REMOTE_ADDR", "") if request is not None else ""
+    address = request.META.get("REMOTE_ADDR", "") if request is not None else ""
+    try:
+        ip = ipaddress.ip_address(address)
+    except ValueError:
+        return address
+    if ip.version == 6:
+        if ip.ipv4_mapped:
+            return str(ip.ipv4_mapped)
+        # One host commonly has a whole /64 to pick addresses from.
+        return str(ipaddress.ip_network(f"{ip}/64", strict=False))
+    return str(ip)
 
 
 def _keys(request, username: str) -> list[tuple[str, str, int]]:

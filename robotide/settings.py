@@ -171,7 +171,8 @@ if HTTPS:
     SECURE_HSTS_SECONDS = 365 * 24 * 3600
     SECURE_HSTS_INCLUDE_SUBDOMAINS = True
     SECURE_SSL_REDIRECT = env_bool("ROBOTIDE_HTTPS_REDIRECT", False)
-if env_bool("ROBOTIDE_BEHIND_PROXY", False):
+BEHIND_PROXY = env_bool("ROBOTIDE_BEHIND_PROXY", False)
+if BEHIND_PROXY:
     # Only behind a proxy that sets (not forwards) the header: otherwise clients could claim HTTPS.
     SECURE_PROXY_SSL_HEADER = ("HTTP_X_FORWARDED_PROTO", "https")
 

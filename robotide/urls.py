@@ -52,4 +52,5 @@ urlpatterns = [
     path("admin/", admin.site.urls),
 ]
 
+handler400 = "robotide.security.bad_request"
 handler404 = "robotide.api.page_not_found"

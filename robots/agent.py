@@ -31,6 +31,7 @@ from programs.isolation import (
     IsolationUnavailable,
     Policy,
     prepare_workdir,
+    run_uid,
     unreachable_ancestor,
 )
 from programs.languages import CLIENTS_DIR, LanguageUnavailable, get_language
@@ -214,7 +215,7 @@ class RobotAgent:
         workdir.mkdir(parents=True, exist_ok=True)
         program_file = workdir / message["filename"]
         program_file.write_text(message["source"])
-        uid = self.isolation.uid(run_id)
+        uid = self.isolation.uid(run_id, str(settings.DATA_DIR))
         prepare_workdir(workdir, uid)
         limits = launcher.Limits.from_settings(self.limits)
         token = secrets.token_urlsafe(24)
@@ -372,7 +373,7 @@ def flat_units(specs: dict) -> dict[str, str]:
 def end_leftovers(run_id: int) -> None:
     """Whatever a lost run left running ends now: its account's processes are all its own."""
     for network in NETWORKS:
-        signal_account(InForce(sandbox=False, network=network, tmp_mb=0).uid(run_id), SIGKILL)
+        signal_account(run_uid(network, run_id, str(settings.DATA_DIR)), SIGKILL)
 
 
 def resolve_isolation(robot: Robot) -> tuple[InForce | None, str]:

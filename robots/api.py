@@ -9,6 +9,7 @@ from ninja.responses import Status
 from pydantic import field_validator, model_validator
 
 import rhal
+from programs.api import Error
 from programs.isolation import IsolationUnavailable, Policy
 from programs.launcher import Limits
 from robots.bus import announce_robot_sync, ask_agent_sync
@@ -34,7 +35,6 @@ class RobotIn(Schema):
             known = ", ".join(f"{name}://" for name in sorted(rhal.DRIVERS))
             raise ValueError(f"no robot driver for {value!r}; known: {known}")
         return value
-
 
     @model_validator(mode="after")
     def usable_settings(self):
@@ -86,13 +86,13 @@ def get_robot(request, name: str):
     return get_robot_for_user(request.user, name)
 
 
-@robots_router.get("/{name}/sensors", response=dict)
+@robots_router.get("/{name}/sensors", response={200: dict, 503: Error})
 def robot_sensors(request, name: str):
     robot = get_robot_for_user(request.user, name)
     return ask_agent_sync(robot.name, "robot.sensors")["sensors"]
 
 
-@robots_router.post("/{name}/estop", response=dict)
+@robots_router.post("/{name}/estop", response={200: dict, 503: Error})
 def robot_estop(request, name: str):
     robot = get_robot_for_user(request.user, name)
     reply = ask_agent_sync(robot.name, "robot.estop")

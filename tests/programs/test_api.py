@@ -113,7 +113,10 @@ def test_robot_settings_that_cannot_work_are_refused(api, alice):
         {"isolation": "none"},
         {"wheels": 6},
     ]:
-        response = api("POST", "/api/robots", {"name": "r4", "url": "sim://", "settings": settings})
+        body = {"name": "r4", "url": "sim://", "settings": settings}
+        response = api("POST", "/api/robots", body)
         assert response.status_code == 422, (settings, response.text)
-    ok = api("POST", "/api/robots", {"name": "r4", "url": "sim://", "settings": {"network": "none"}})
+    ok = api(
+        "POST", "/api/robots", {"name": "r4", "url": "sim://", "settings": {"network": "none"}}
+    )
     assert ok.status_code == 201
