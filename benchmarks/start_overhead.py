@@ -7,7 +7,8 @@ for "request -> first line in the log file".
 
 Baseline, measured in the same run and interleaved with it: the same interpreter running the
 same program file from this process (spawn -> first line read on a pipe), and the launcher's
-own command line (setpriv + prlimit + interpreter) built by programs.launcher.
+own command line as the agent builds it (bubblewrap sandbox where installed, setpriv into the
+run's own account, prlimit, interpreter).
 
 The programs print the time at their first statement (Python's time.time(), bash's
 $EPOCHREALTIME), which splits the latency into launch (request -> program running), capture
@@ -38,6 +39,7 @@ from benchmarks.common import (
     ws_connect,
 )
 from programs import launcher
+from programs.isolation import Policy, prepare_workdir
 from programs.languages import get_language
 
 BENCH = "1 start overhead"
@@ -204,13 +206,29 @@ def measure(work: Path) -> list[Figure]:
     figures: list[Figure] = []
     languages = {name: get_language(name) for name in SOURCES}
     bare_cmds: dict[str, tuple[list[str], dict]] = {}
+    # The launcher's chain as the agent builds it by default: the run's own account, and the
+    # bubblewrap sandbox where it is installed.
+    in_force = Policy().resolve()
+    uid = in_force.uid(0, str(work))
+    sockets = work / "sockets"
+    sockets.mkdir()
     for name, language in languages.items():
         file = work / f"prog{language.extension}"
         file.write_text(SOURCES[name])
         env = launcher.environment(language, work, {})
         bare_cmds[f"bare {name}"] = (language.command(str(file)), env)
         limits = launcher.Limits()
-        bare_cmds[f"launcher {name}"] = (launcher.command(language, file, limits), env)
+        home = work / f"run-{name}" / "work"
+        home.mkdir(parents=True)
+        (home / file.name).write_text(SOURCES[name])
+        prepare_workdir(home, uid)
+        cmd = launcher.command(
+            language, home / file.name, limits, isolation=in_force, uid=uid, socket_dir=sockets
+        )
+        isolated_env = launcher.environment(
+            language, in_force.home(home), {}, clients_dir=in_force.clients()
+        )
+        bare_cmds[f"launcher {name}"] = (cmd, isolated_env)
     python = languages["python"].interpreter_path()
     bare_cmds["python3 -u -c print(1)"] = ([python, "-u", "-c", "print(1)"], {"PATH": "/usr/bin"})
     bare_cmds["sh -c 'echo 1'"] = (["/bin/sh", "-c", "echo 1"], {"PATH": "/usr/bin"})
@@ -288,7 +306,7 @@ def measure(work: Path) -> list[Figure]:
         figures.append(
             Figure(
                 BENCH,
-                f"{name}: launcher chain (setpriv+prlimit), median",
+                f"{name}: launcher chain (sandbox+account+limits), median",
                 stats(bare[f"launcher {name}"], "first")[0] * MS,
                 "ms",
             )
