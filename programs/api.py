@@ -2,6 +2,7 @@ from datetime import datetime
 from typing import Literal
 
 from django.db import IntegrityError
+from django.db.models import Count
 from django.http import HttpResponse, StreamingHttpResponse
 from ninja import Field, Router, Schema
 from ninja.responses import Status
@@ -108,7 +109,7 @@ def _program_out(program: Program) -> Program:
 
 @programs_router.get("", response=list[ProgramOut])
 def list_programs(request):
-    return [_program_out(p) for p in programs_for_user(request.user)]
+    return programs_for_user(request.user).annotate(revision_count=Count("revisions"))
 
 
 @programs_router.post("", response={201: ProgramOut, 409: Error})

@@ -113,3 +113,12 @@ def language_for_filename(filename: str) -> Language | None:
 
 def language_choices() -> list[tuple[str, str]]:
     return [(lang.name, lang.label) for lang in LANGUAGES.values()]
+
+
+def editor_modes() -> list[str]:
+    """The editor's (CodeMirror's) modes the languages need, for the page to load."""
+    return sorted({lang.editor_mode for lang in LANGUAGES.values() if lang.editor_mode})
+
+
+def editor_mode_of_language() -> dict[str, str]:
+    return {name: lang.editor_mode for name, lang in LANGUAGES.items()}

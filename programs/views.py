@@ -1,4 +1,5 @@
 import difflib
+import json
 
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
@@ -10,7 +11,7 @@ from django.views.decorators.http import require_POST
 
 from programs.access import get_program_for_user, get_run_for_user, programs_for_user, runs_for_user
 from programs.forms import EditProgramForm, NewProgramForm, UploadForm, unique_name
-from programs.languages import get_language
+from programs.languages import editor_mode_of_language, editor_modes, get_language
 from programs.models import AgentUnreachable, Program, Run, RunRefused, request_stop, start_run
 from programs.runlog import plain_text, render_lines, tail
 from robots.models import get_robot_for_user, robots_for_user
@@ -86,6 +87,8 @@ def _render_editor(request, program, form, status=200):
         "program": program,
         "form": form,
         "language": program.lang,
+        "editor_modes": editor_modes(),
+        "editor_modes_json": json.dumps(editor_mode_of_language()),
         "robots": robots_for_user(request.user),
         "runs": runs_for_user(request.user).filter(program=program)[:10],
         "revision": program.revisions.first(),

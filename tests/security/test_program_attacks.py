@@ -5,8 +5,10 @@ asserted from its log and state, and the server is checked to keep serving meanw
 """
 
 import json
+import re
 import shutil
 import socket
+import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -291,3 +293,15 @@ def attack_as(app, source):
     program = app.create_program(f"a {time.monotonic_ns()}", source)
     run = app.wait_run(app.run_program(program["id"])["id"])
     return run, app.api("GET", f"/api/runs/{run['id']}/log").text
+
+
+def test_loopback_runs_are_kept_to_this_machine_by_the_firewall(app):
+    """This machine offers no test host beyond loopback to try a connection to, so the rule
+    that refuses the rest is read back, and the run's account checked to fall under it."""
+    run, log = attack(app, "import os\nprint('uid', os.getuid())\n", robot="lab")
+    uid = int(log.split()[1])
+    table = subprocess.run(
+        ["nft", "list", "table", "inet", "robotide"], capture_output=True, text=True, check=True
+    ).stdout
+    low, high = map(int, re.search(r'skuid (\d+)-(\d+) oifname != "lo" reject', table).groups())
+    assert low <= uid <= high

@@ -25,7 +25,7 @@
     });
     editor.setSize(null, "60vh");
     var language = form.querySelector('select[name="language"]');
-    var modes = { python: "python", shell: "shell" };
+    var modes = JSON.parse(textarea.dataset.editorModes || "{}");  // language -> mode
     if (language) language.addEventListener("change", function () {
       editor.setOption("mode", modes[language.value] || null);
     });
