@@ -76,7 +76,10 @@ class RobotAgent:
         # A short private folder: Unix socket paths are limited to 107 bytes.
         self.socket_dir = Path(tempfile.mkdtemp(prefix="robotide-"))
         self.server = rpc.RobotApiServer(
-            self.api.handle, unix_path=self.socket_dir / "api.sock", quick=self.api.quick
+            self.api.handle,
+            unix_path=self.socket_dir / "api.sock",
+            quick=self.api.quick,
+            closed=self.api.forget,
         )
         self.ready = asyncio.Event()
         self._outbox: asyncio.Queue = asyncio.Queue()

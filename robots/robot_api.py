@@ -1,5 +1,7 @@
 """The Robot API methods a program may call, bound to the agent that launched it."""
 
+import asyncio
+import json
 import math
 import time
 
@@ -17,6 +19,9 @@ from robots.rpc import (
 MAX_SHOW_NAME = 64
 MAX_SHOW_BYTES = 256 * 1024
 MAX_SHOWS = 64
+MAX_MESSAGE_BYTES = 64 * 1024
+MAX_QUEUED = 1000  # values a subscriber may have waiting
+MAX_MEMORY_KEYS = 1000
 
 
 class RobotApi:
@@ -30,12 +35,20 @@ class RobotApi:
             "sensor": self.sensor,
             "capabilities": self.capabilities,
             "show": self.show,
+            "publish": self.publish,
+            "subscribe": self.subscribe,
+            "receive": self.receive,
+            "memory_set": self.memory_set,
+            "memory_get": self.memory_get,
         }
+        self.topics: dict[str, set[asyncio.Queue]] = {}
+        self.memory: dict[str, object] = {}
 
     def quick(self, method: str) -> bool:
         """Methods that need no task of their own: those that ask the driver nothing it must
         wait for, on a driver that says its answers come at once (the sim robot)."""
-        if method in ("auth", "capabilities", "show"):
+        if method in ("auth", "capabilities", "show", "publish", "subscribe", "memory_set",
+                      "memory_get"):  # fmt: skip
             return True
         return method in ("sensors", "sensor", "drive", "stop") and self.agent.driver.quick
 
@@ -52,6 +65,8 @@ class RobotApi:
             known = ", ".join(sorted(self.methods))
             raise RpcError(METHOD_NOT_FOUND, f"no method {method!r}; methods: {known}")
         try:
+            if handler in (self.subscribe, self.receive):  # these belong to the connection
+                return await handler(active, params, session=session)
             return await handler(active, params)
         except rhal.NotSupportedError as exc:
             raise RpcError(ROBOT_ERROR, str(exc)) from None
@@ -101,6 +116,75 @@ class RobotApi:
             raise ValueError(f"at most {MAX_SHOWS} shown values per robot")
         shows[name] = self.changed_shows[name] = entry
         return None
+
+    # -- programs that cooperate: messages by topic, and a small shared memory ----------------
+
+    async def publish(self, active, params):
+        topic, value = bind_params(params, ("topic", "value"), 2)
+        check_name("topic", topic)
+        check_size(value)
+        queues = self.topics.get(topic, ())
+        for queue in queues:
+            if queue.full():  # a subscriber that does not keep up loses its oldest
+                queue.get_nowait()
+            queue.put_nowait(value)
+        return len(queues)
+
+    async def subscribe(self, active, params, session=None):
+        (topic,) = bind_params(params, ("topic",), 1)
+        check_name("topic", topic)
+        if topic not in session.subscriptions:
+            queue = asyncio.Queue(MAX_QUEUED)
+            session.subscriptions[topic] = queue
+            self.topics.setdefault(topic, set()).add(queue)
+        return None
+
+    async def receive(self, active, params, session=None):
+        topic, timeout = bind_params(params, ("topic", "timeout"), 1)
+        queue = session.subscriptions.get(topic)
+        if queue is None:
+            raise ValueError(f"subscribe to {topic!r} before receiving from it")
+        if timeout is not None and (
+            isinstance(timeout, bool) or not isinstance(timeout, int | float) or timeout < 0
+        ):
+            raise ValueError("timeout must be a number of seconds, or null to wait for ever")
+        try:
+            return await asyncio.wait_for(queue.get(), timeout)
+        except TimeoutError:
+            return None
+
+    def forget(self, session) -> None:
+        """A connection gone: its subscriptions with it."""
+        for topic, queue in session.subscriptions.items():
+            queues = self.topics.get(topic)
+            if queues is not None:
+                queues.discard(queue)
+                if not queues:
+                    del self.topics[topic]
+
+    async def memory_set(self, active, params):
+        key, value = bind_params(params, ("key", "value"), 2)
+        check_name("key", key)
+        check_size(value)
+        if key not in self.memory and len(self.memory) >= MAX_MEMORY_KEYS:
+            raise ValueError(f"the shared memory holds at most {MAX_MEMORY_KEYS} keys")
+        self.memory[key] = value
+        return None
+
+    async def memory_get(self, active, params):
+        (key,) = bind_params(params, ("key",), 1)
+        check_name("key", key)
+        return self.memory.get(key)
+
+
+def check_name(what: str, name) -> None:
+    if not isinstance(name, str) or not 0 < len(name) <= MAX_SHOW_NAME:
+        raise ValueError(f"{what} must be a text of 1 to {MAX_SHOW_NAME} characters")
+
+
+def check_size(value) -> None:
+    if len(json.dumps(value)) > MAX_MESSAGE_BYTES:
+        raise ValueError(f"value larger than {MAX_MESSAGE_BYTES // 1024} KB")
 
 
 def check_show_value(name, value):

@@ -45,11 +45,12 @@ class RpcError(Exception):
 class Session:
     """One client connection; `run` is set once it has authenticated."""
 
-    __slots__ = ("run", "peer")
+    __slots__ = ("run", "peer", "subscriptions")
 
     def __init__(self, peer):
         self.run = None
         self.peer = peer
+        self.subscriptions: dict = {}  # topic -> queue of the values published to it
 
 
 # handler(session, method, params) -> result; raises RpcError for a clean error reply
@@ -60,10 +61,11 @@ class RobotApiServer:
     """Serves `handler`; `quick(method)`, if given, names the methods safe to step eagerly."""
 
     def __init__(
-        self, handler: Handler, host="127.0.0.1", port=0, unix_path=None, quick=None
+        self, handler: Handler, host="127.0.0.1", port=0, unix_path=None, quick=None, closed=None
     ) -> None:
         self.handler = handler
         self.quick = quick
+        self.closed = closed  # closed(session): a connection has gone
         self.host, self.port = host, port
         self.unix_path = unix_path
         self._servers: list[asyncio.base_events.Server] = []
@@ -173,6 +175,8 @@ class _Connection(asyncio.Protocol):
     def connection_lost(self, exc) -> None:
         self.server._connections.discard(self)
         self.backlog.clear()
+        if self.server.closed is not None:
+            self.server.closed(self.session)
 
     def pause_writing(self) -> None:  # a client that does not read its replies: stop reading
         self.transport.pause_reading()

@@ -198,3 +198,55 @@ async def test_units_are_named_as_the_page_names_readings(agent):
     units = flat_units(agent.driver.capabilities()["sensors"])
     assert units["heading"] == "deg" and units["position.x"] == "m"
     assert units["position.theta"] == "rad" and units["velocity.angular"] == "rad/s"
+
+
+async def connect_as(agent, token):
+    host, port = agent.api_address.rsplit(":", 1)
+    conn = Conn(*await asyncio.open_connection(host, int(port)))
+    assert "result" in await conn.call("auth", token)
+    return conn
+
+
+async def test_programs_exchange_messages_by_topic(agent):
+    admit(agent, "tok-a", 1)
+    admit(agent, "tok-b", 2)
+    a, b = await connect_as(agent, "tok-a"), await connect_as(agent, "tok-b")
+    assert (await a.call("publish", "cmd", "early"))["result"] == 0  # nobody listens yet
+    assert (await b.call("subscribe", "cmd"))["result"] is None
+    assert (await a.call("publish", "cmd", {"go": [1, 2]}))["result"] == 1
+    assert (await a.call("publish", "cmd", "second"))["result"] == 1
+    assert (await b.call("receive", "cmd", 1))["result"] == {"go": [1, 2]}
+    assert (await b.call("receive", "cmd", 1))["result"] == "second"
+    assert (await b.call("receive", "cmd", 0.05))["result"] is None  # timed out
+    waiting = asyncio.ensure_future(b.call("receive", "cmd"))  # waits for ever...
+    await asyncio.sleep(0.05)
+    await a.call("publish", "cmd", 3)
+    assert (await asyncio.wait_for(waiting, 2))["result"] == 3  # ...until a value comes
+    b.writer.close()
+    await asyncio.sleep(0.05)
+    assert (await a.call("publish", "cmd", "gone"))["result"] == 0  # subscription closed
+    a.writer.close()
+
+
+async def test_receive_needs_a_subscription_and_a_sane_timeout(agent):
+    admit(agent)
+    conn = await connect_as(agent, "good-token")
+    assert (await conn.call("receive", "t", 1))["error"]["code"] == -32602
+    await conn.call("subscribe", "t")
+    assert (await conn.call("receive", "t", -1))["error"]["code"] == -32602
+    assert (await conn.call("receive", "t", "soon"))["error"]["code"] == -32602
+    assert (await conn.call("publish", "", 1))["error"]["code"] == -32602
+    conn.writer.close()
+
+
+async def test_the_shared_memory(agent):
+    admit(agent, "tok-a", 1)
+    admit(agent, "tok-b", 2)
+    a, b = await connect_as(agent, "tok-a"), await connect_as(agent, "tok-b")
+    assert (await a.call("memory_get", "speed"))["result"] is None
+    await a.call("memory_set", "speed", 0.25)
+    assert (await b.call("memory_get", "speed"))["result"] == 0.25
+    too_big = await a.call("memory_set", "blob", "x" * 70_000)
+    assert too_big["error"]["code"] == -32602
+    a.writer.close()
+    b.writer.close()
