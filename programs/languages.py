@@ -25,7 +25,8 @@ class Language:
     install_hint: str = ""
     template: str = ""
     env: dict[str, str] = field(default_factory=dict)
-    # environment variable -> client folder (relative to CLIENTS_DIR) prepended to it
+    # environment variable -> where the interpreter finds the client, "{clients}" standing for
+    # the clients folder; an existing value (PATH) is kept after it
     client_paths: dict[str, str] = field(default_factory=dict)
 
     def interpreter_path(self) -> str | None:
@@ -46,7 +47,7 @@ class Language:
         return [path, *self.args, program_file]
 
     def client_env(self, clients_dir: Path = CLIENTS_DIR) -> dict[str, str]:
-        return {var: str(clients_dir / folder) for var, folder in self.client_paths.items()}
+        return {var: path.format(clients=clients_dir) for var, path in self.client_paths.items()}
 
 
 class LanguageUnavailable(Exception):
@@ -69,6 +70,45 @@ SHELL_TEMPLATE = """\
 echo "hello robot, my heading is $(robot sensors heading)"
 """
 
+PERL_TEMPLATE = """\
+use strict;
+use warnings;
+use Robot;
+
+my $bot = Robot->new;
+print "hello robot, my heading is ", $bot->sensors->{heading}, "\\n";
+"""
+
+RUBY_TEMPLATE = """\
+require 'robot'
+
+bot = Robot.new
+puts "hello robot, my heading is #{bot.sensors['heading']}"
+"""
+
+LUA_TEMPLATE = """\
+local Robot = require('robot')
+
+local bot = Robot.new()
+print('hello robot, my heading is ' .. bot:sensors().heading)
+"""
+
+JAVASCRIPT_TEMPLATE = """\
+const { Robot } = require('robot');
+
+(async () => {
+  const bot = new Robot();
+  console.log('hello robot, my heading is', (await bot.sensors()).heading);
+  bot.close();
+})();
+"""
+
+TCL_TEMPLATE = """\
+package require robot
+
+puts "hello robot, my heading is [dict get [robot::sensors] heading]"
+"""
+
 LANGUAGES: dict[str, Language] = {
     lang.name: lang
     for lang in [
@@ -82,7 +122,7 @@ LANGUAGES: dict[str, Language] = {
             install_hint="apt-get install python3",
             template=PYTHON_TEMPLATE,
             env={"PYTHONUNBUFFERED": "1", "PYTHONDONTWRITEBYTECODE": "1"},
-            client_paths={"PYTHONPATH": "python"},
+            client_paths={"PYTHONPATH": "{clients}/python"},
         ),
         Language(
             name="shell",
@@ -92,7 +132,58 @@ LANGUAGES: dict[str, Language] = {
             editor_mode="shell",
             install_hint="apt-get install bash",
             template=SHELL_TEMPLATE,
-            client_paths={"PATH": "shell"},
+            client_paths={"PATH": "{clients}/shell"},
+        ),
+        Language(
+            name="perl",
+            label="Perl",
+            extension=".pl",
+            interpreter=("perl",),
+            editor_mode="perl",
+            install_hint="apt-get install perl",
+            template=PERL_TEMPLATE,
+            client_paths={"PERL5LIB": "{clients}/perl"},
+        ),
+        Language(
+            name="ruby",
+            label="Ruby",
+            extension=".rb",
+            interpreter=("ruby",),
+            editor_mode="ruby",
+            install_hint="apt-get install ruby",
+            template=RUBY_TEMPLATE,
+            env={"RUBYOPT": "-W0"},
+            client_paths={"RUBYLIB": "{clients}/ruby"},
+        ),
+        Language(
+            name="lua",
+            label="Lua",
+            extension=".lua",
+            interpreter=("lua5.4", "lua"),
+            editor_mode="lua",
+            install_hint="apt-get install lua5.4 lua-socket",
+            template=LUA_TEMPLATE,
+            client_paths={"LUA_PATH": "{clients}/lua/?.lua;;"},
+        ),
+        Language(
+            name="javascript",
+            label="JavaScript (Node.js)",
+            extension=".js",
+            interpreter=("node", "nodejs"),
+            editor_mode="javascript",
+            install_hint="apt-get install nodejs",
+            template=JAVASCRIPT_TEMPLATE,
+            client_paths={"NODE_PATH": "{clients}/javascript"},
+        ),
+        Language(
+            name="tcl",
+            label="Tcl",
+            extension=".tcl",
+            interpreter=("tclsh", "tclsh8.6"),
+            editor_mode="tcl",
+            install_hint="apt-get install tcl tcllib",
+            template=TCL_TEMPLATE,
+            client_paths={"TCLLIBPATH": "{clients}/tcl"},
         ),
     ]
 }
@@ -122,3 +213,8 @@ def editor_modes() -> list[str]:
 
 def editor_mode_of_language() -> dict[str, str]:
     return {name: lang.editor_mode for name, lang in LANGUAGES.items()}
+
+
+def availability() -> list[dict]:
+    """Each language with where its interpreter is on this computer (None: not installed)."""
+    return [{**vars(lang), "path": lang.interpreter_path()} for lang in LANGUAGES.values()]

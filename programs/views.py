@@ -11,7 +11,12 @@ from django.views.decorators.http import require_POST
 
 from programs.access import get_program_for_user, get_run_for_user, programs_for_user, runs_for_user
 from programs.forms import EditProgramForm, NewProgramForm, UploadForm, unique_name
-from programs.languages import editor_mode_of_language, editor_modes, get_language
+from programs.languages import (
+    availability,
+    editor_mode_of_language,
+    editor_modes,
+    get_language,
+)
 from programs.models import AgentUnreachable, Program, Run, RunRefused, request_stop, start_run
 from programs.runlog import plain_text, render_lines, tail
 from robots.models import get_robot_for_user, robots_for_user
@@ -259,3 +264,9 @@ def run_stop(request: HttpRequest, run_id: int) -> HttpResponse:
     if url_has_allowed_host_and_scheme(next_url, allowed_hosts={request.get_host()}):
         return redirect(next_url)
     return redirect("run-detail", run.pk)
+
+
+@login_required
+def language_list(request: HttpRequest) -> HttpResponse:
+    """Which languages this computer can run, and what to install for the others."""
+    return render(request, "programs/languages.html", {"languages": availability()})

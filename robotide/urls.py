@@ -23,6 +23,7 @@ urlpatterns = [
         programs.revision_detail,
         name="revision-detail",
     ),
+    path("languages/", programs.language_list, name="language-list"),
     path("runs/", programs.run_list, name="run-list"),
     path("runs/<int:run_id>/", programs.run_detail, name="run-detail"),
     path("runs/<int:run_id>/log", programs.run_log, name="run-log"),

@@ -1,7 +1,8 @@
 #!/bin/sh
 # What the tests need from the machine, from Debian's archive, installed only when missing:
 # Chromium (browser tests), util-linux (setpriv, prlimit), bubblewrap and nftables (the runs'
-# sandbox and network), PostgreSQL and Redis (fleet mode), started if they are not running.
+# sandbox and network), the languages' interpreters, PostgreSQL and Redis (fleet mode), started
+# if they are not running.
 set -eu
 need=""
 have() { command -v "$1" >/dev/null 2>&1 || [ -x "/usr/sbin/$1" ] || [ -x "/sbin/$1" ]; }
@@ -11,6 +12,14 @@ have prlimit || need="$need util-linux"
 have bwrap || need="$need bubblewrap"
 have nft || need="$need nftables"
 [ -x /usr/bin/python3 ] || need="$need python3"
+# The languages programs are written in (programs/languages.py) and what their clients use.
+have perl || need="$need perl"
+have ruby || need="$need ruby"
+have lua5.4 || need="$need lua5.4"
+[ -e /usr/share/lua/5.4/socket.lua ] || need="$need lua-socket"
+have tclsh || need="$need tcl"
+ls -d /usr/share/tcltk/tcllib* >/dev/null 2>&1 || need="$need tcllib"
+have node || need="$need nodejs"
 have redis-server || need="$need redis-server"
 have pg_ctlcluster || need="$need postgresql"
 if [ -n "$need" ]; then
