@@ -272,16 +272,8 @@ class RobotAgent:
             self.motion_owner = None
             with contextlib.suppress(rhal.RhalError):
                 await self.driver.stop()
-        self.forget_shows(active.run_id)
         shutil.rmtree(settings.RUNS_DIR / str(active.run_id) / "work", ignore_errors=True)
         await self._end_run(active.run_id, outcome.state, outcome.exit_code, outcome.reason)
-
-    def forget_shows(self, run_id: int) -> None:
-        """What an ended run showed goes from the robot's page with it."""
-        for name in [n for n, entry in self.shows.items() if entry["run"] == run_id]:
-            del self.shows[name]
-            self.api.changed_shows.pop(name, None)
-        self._shows_snapshot_due = True
 
     async def _end_run(self, run_id, state, exit_code, reason) -> None:
         await database_sync_to_async(Run.mark_ended)(run_id, state, exit_code, reason)

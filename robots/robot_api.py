@@ -113,9 +113,19 @@ class RobotApi:
         entry = {"value": check_show_value(name, value), "run": active.run_id, "time": time.time()}
         shows = self.agent.shows
         if name not in shows and len(shows) >= MAX_SHOWS:
-            raise ValueError(f"at most {MAX_SHOWS} shown values per robot")
+            self.make_room(shows)
         shows[name] = self.changed_shows[name] = entry
         return None
+
+    def make_room(self, shows: dict) -> None:
+        """Values stay on the robot's page after their program ends, until the room is needed:
+        then the oldest value of an ended run goes."""
+        ended = [(e["time"], n) for n, e in shows.items() if e["run"] not in self.agent.runs]
+        if not ended:
+            raise ValueError(f"at most {MAX_SHOWS} values shown at once per robot")
+        name = min(ended)[1]
+        del shows[name]
+        self.agent._shows_snapshot_due = True  # the page drops it too
 
     # -- programs that cooperate: messages by topic, and a small shared memory ----------------
 

@@ -250,3 +250,19 @@ async def test_the_shared_memory(agent):
     assert too_big["error"]["code"] == -32602
     a.writer.close()
     b.writer.close()
+
+
+async def test_shown_values_outlive_their_run_until_room_is_needed(agent, conn):
+    from robots.robot_api import MAX_SHOWS
+
+    first = admit(agent, "tok-1", 1)
+    await conn.call("auth", "tok-1")
+    for i in range(MAX_SHOWS):
+        assert "result" in await conn.call("show", f"v{i}", i)
+    assert "error" in await conn.call("show", "one more", 1)  # its own values are all live
+    end(agent, first)
+    admit(agent, "tok-2", 2)
+    second = await connect_as(agent, "tok-2")
+    assert "result" in await second.call("show", "new", 1)
+    assert "v0" not in agent.shows and "v1" in agent.shows and len(agent.shows) == MAX_SHOWS
+    second.writer.close()

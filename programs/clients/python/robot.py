@@ -6,6 +6,13 @@ bot.drive(0.2, 0.0)             # linear m/s, angular rad/s (clamped to the robo
 print(bot.sensors()["heading"])  # compass, degrees
 bot.show("heading", 42)          # appears live on the robot's page
 bot.stop()
+
+Programs on the same robot cooperate through messages and a shared memory:
+bot.subscribe("speed")           # this connection gets what is published on "speed"
+bot.receive("speed", 5.0)        # the next value, or None after 5 s (no timeout: wait)
+bot.publish("speed", 0.2)        # any JSON value; returns how many subscribers it reached
+bot.memory_set("laps", 3)
+bot.memory_get("laps")           # 3, or None if nothing is kept under that key
 """
 
 import json
@@ -26,6 +33,22 @@ class RobotError(Exception):
         self.data = data
 
 
+def _connect(address):
+    """A socket connected to `address`: unix:/path or host:port."""
+    if address.startswith("unix:"):
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            sock.connect(address[len("unix:") :])
+        except OSError:
+            sock.close()
+            raise
+        return sock
+    host, _, port = address.rpartition(":")
+    sock = socket.create_connection((host or "127.0.0.1", int(port)))
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    return sock
+
+
 class Robot:
     def __init__(self, address=None, token=None):
         address = address or os.environ.get("ROBOT_API")  # unix:/path or host:port
@@ -34,16 +57,14 @@ class Robot:
             raise RobotError(
                 "ROBOT_API and ROBOT_TOKEN are not set: run this program from robotide"
             )
-        if address.startswith("unix:"):
-            self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-            self._sock.connect(address[len("unix:") :])
-        else:
-            host, _, port = address.rpartition(":")
-            self._sock = socket.create_connection((host or "127.0.0.1", int(port)))
-            self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._sock = _connect(address)
         self._file = self._sock.makefile("rb")
         self._next_id = 0
-        self.call("auth", token)
+        try:
+            self.call("auth", token)
+        except BaseException:
+            self.close()
+            raise
 
     def call(self, method, *params):
         self._next_id += 1
@@ -80,6 +101,27 @@ class Robot:
     def show(self, name, value):
         """Publish a number, a text or an SVG drawing (a string starting with <svg) by name."""
         return self.call("show", name, value)
+
+    def publish(self, topic, value):
+        """Send `value` (any JSON) to the programs subscribed to `topic`; returns how many."""
+        return self.call("publish", topic, value)
+
+    def subscribe(self, topic):
+        """From now on this connection gets what is published on `topic` (see receive)."""
+        return self.call("subscribe", topic)
+
+    def receive(self, topic, timeout=None):
+        """The next value published on a subscribed topic; None after `timeout` seconds
+        (None: wait for ever)."""
+        return self.call("receive", topic, timeout)
+
+    def memory_set(self, key, value):
+        """Keep `value` (any JSON) under `key` in the memory the robot's programs share."""
+        return self.call("memory_set", key, value)
+
+    def memory_get(self, key):
+        """The value kept under `key`, or None."""
+        return self.call("memory_get", key)
 
     def close(self):
         self._file.close()
