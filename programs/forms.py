@@ -1,6 +1,6 @@
 from django import forms
 
-from programs.languages import language_choices, language_for_filename
+from programs.languages import language_for_filename, language_options
 from programs.models import MAX_SOURCE_BYTES, Program
 
 MAX_NAME = Program._meta.get_field("name").max_length
@@ -8,7 +8,7 @@ MAX_NAME = Program._meta.get_field("name").max_length
 
 class NewProgramForm(forms.Form):
     name = forms.CharField(max_length=100)
-    language = forms.ChoiceField(choices=language_choices)
+    language = forms.ChoiceField(choices=language_options)
 
     def __init__(self, *args, owner=None, **kwargs):
         super().__init__(*args, **kwargs)
@@ -20,7 +20,7 @@ class NewProgramForm(forms.Form):
 
 class EditProgramForm(forms.Form):
     source = forms.CharField(required=False, widget=forms.Textarea, strip=False)
-    language = forms.ChoiceField(choices=language_choices)
+    language = forms.ChoiceField(choices=language_options)
     save_as = forms.CharField(max_length=100, required=False, label="Save as")
 
     def clean_source(self):
@@ -34,7 +34,7 @@ class EditProgramForm(forms.Form):
 class UploadForm(forms.Form):
     file = forms.FileField()
     language = forms.ChoiceField(
-        choices=[("", "from the file name"), *language_choices()], required=False
+        choices=[("", "from the file name"), *language_options()], required=False
     )
 
     def __init__(self, *args, owner=None, **kwargs):

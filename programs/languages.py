@@ -206,6 +206,15 @@ def language_choices() -> list[tuple[str, str]]:
     return [(lang.name, lang.label) for lang in LANGUAGES.values()]
 
 
+def language_options() -> list[tuple[str, str]]:
+    """For a form: a language whose interpreter is missing says so (and what to install)."""
+    return [
+        (lang.name, lang.label if lang.available else f"{lang.label} (not installed: "
+         f"{lang.install_hint})")
+        for lang in LANGUAGES.values()
+    ]  # fmt: skip
+
+
 def editor_modes() -> list[str]:
     """The editor's (CodeMirror's) modes the languages need, for the page to load."""
     return sorted({lang.editor_mode for lang in LANGUAGES.values() if lang.editor_mode})

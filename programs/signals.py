@@ -4,7 +4,7 @@ from django.conf import settings
 from django.db.models.signals import post_save
 from django.dispatch import receiver
 
-from programs.languages import language_for_filename
+from programs.languages import LANGUAGES, language_for_filename
 
 EXAMPLES_DIR = Path(__file__).resolve().parent / "examples"
 EXAMPLES = {
@@ -12,6 +12,10 @@ EXAMPLES = {
     "square.py": "Drive a square",
     "wall.py": "Stop before the wall",
     "hello.sh": "Hello from the shell",
+    # The same program in every language: the Robot API is the same in each.
+    **{
+        f"wall_turn{lang.extension}": f"Wall and turn ({lang.label})" for lang in LANGUAGES.values()
+    },
 }
 
 

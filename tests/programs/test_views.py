@@ -5,6 +5,7 @@ from django.contrib.auth.models import User
 from django.core.files.uploadedfile import SimpleUploadedFile
 
 from programs.models import Program, Run
+from programs.signals import EXAMPLES
 from robots.models import Robot
 
 pytestmark = pytest.mark.django_db
@@ -31,7 +32,8 @@ def program(alice):
 
 def test_new_accounts_get_the_examples(alice):
     names = set(Program.objects.filter(owner=alice).values_list("name", flat=True))
-    assert names == {"Compass", "Drive a square", "Stop before the wall", "Hello from the shell"}
+    assert names == set(EXAMPLES.values())
+    assert {"Compass", "Drive a square", "Stop before the wall", "Wall and turn (Perl)"} <= names
     assert all(p.revisions.count() == 1 for p in Program.objects.filter(owner=alice))
 
 
