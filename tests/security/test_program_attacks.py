@@ -305,3 +305,10 @@ def test_loopback_runs_are_kept_to_this_machine_by_the_firewall(app):
     ).stdout
     low, high = map(int, re.search(r'skuid (\d+)-(\d+) oifname != "lo" reject', table).groups())
     assert low <= uid <= high
+
+
+def test_tcl_reaches_the_robot_api_without_network(app):
+    """Tcl has no Unix sockets, and network "none" leaves no TCP: its client relays."""
+    source = 'package require robot\nputs "heading [dict get [robot::sensors] heading]"\n'
+    run, log = attack(app, source, language="tcl")
+    assert run["state"] == "finished" and "heading" in log, log

@@ -7,7 +7,8 @@
 #   robot::stop
 #
 # The first command connects with $ROBOT_API_TCP (Tcl has no Unix sockets; else $ROBOT_API if it
-# is host:port) and $ROBOT_TOKEN; robot::connect ?address? ?token? does it explicitly.
+# is host:port) and $ROBOT_TOKEN; robot::connect ?address? ?token? does it explicitly. Where no
+# TCP reaches the API (network "none"), `robot pipe` relays to its Unix socket.
 #
 # Values: a value that is a JSON number (42, -0.5, 1e3) is sent as a number, any other as a
 # string; names, topics and keys always as strings. For true, false, null, lists and objects
@@ -25,6 +26,7 @@ package require json
 namespace eval robot {
     variable sock ""
     variable next_id 0
+    variable here [file dirname [file normalize [info script]]]
     namespace export drive stop sensors sensor capabilities show publish subscribe receive \
         memory_set memory_get call connect close
 }
@@ -121,9 +123,12 @@ proc robot::connect {{address ""} {token ""}} {
         return -code error -errorcode {ROBOT NOTSET} \
             "ROBOT_API_TCP and ROBOT_TOKEN are not set: run this program from robotide"
     }
+    close
     if {[::string match unix:* $address]} {
-        return -code error -errorcode {ROBOT NOTSET} \
-            "Tcl cannot use the Unix socket $address: ROBOT_API_TCP (host:port) is not set"
+        # Tcl has no Unix sockets: the robot command relays for it (as under network "none").
+        set sock [Relay $address]
+        Authenticate $token
+        return
     }
     if {![regexp {^(.*):([0-9]+)$} $address -> host port]} {
         return -code error -errorcode {ROBOT ADDRESS} \
@@ -133,18 +138,39 @@ proc robot::connect {{address ""} {token ""}} {
     if {$host eq ""} {
         set host 127.0.0.1
     }
-    close
     if {[catch {socket $host $port} channel]} {
+        if {[info exists env(ROBOT_API)] && [::string match unix:* $env(ROBOT_API)]} {
+            set sock [Relay $env(ROBOT_API)]  ;# no network here: through the Unix socket
+            Authenticate $token
+            return
+        }
         return -code error -errorcode {ROBOT CONNECT} \
             "cannot reach the Robot API at $address: $channel"
     }
     fconfigure $channel -translation lf -encoding utf-8 -buffering full -blocking 1
     set sock $channel
+    Authenticate $token
+    return
+}
+
+proc robot::Authenticate {token} {
     if {[catch {Request auth [list [json::string $token]]} message options]} {
         close
         return -options $options $message
     }
-    return
+}
+
+# A channel to the API through `robot pipe` (the shell client, beside this one).
+proc robot::Relay {address} {
+    variable here
+    set tool [file join [file dirname $here] shell robot]
+    set ::env(ROBOT_API) $address
+    if {[catch {open |[list $tool pipe] r+} channel]} {
+        return -code error -errorcode {ROBOT CONNECT} \
+            "cannot reach the Robot API at $address through $tool: $channel"
+    }
+    fconfigure $channel -translation lf -encoding utf-8 -buffering full -blocking 1
+    return $channel
 }
 
 proc robot::close {} {
