@@ -1,7 +1,7 @@
 """The robot agent: the only process that owns a robot's hardware and its programs.
 
 It takes commands from the channel layer (run.start, run.stop, robot.estop, robot.sensors,
-robot.camera), serves the Robot API socket to the programs it launched, and publishes their
+robot.state, robot.camera), serves the Robot API socket to the programs it launched, and publishes their
 output, the run states and the robot's telemetry to groups. Embedded mode runs one agent per
 robot inside the web server process (AgentManager); fleet mode runs `robotide agent NAME`.
 """
@@ -190,6 +190,16 @@ class RobotAgent:
     # -- runs -------------------------------------------------------------------------------
 
     async def start_run(self, message: dict) -> None:
+        """In a task of its own, so whatever goes wrong is logged and ends the run."""
+        try:
+            await self._start_run(message)
+        except Exception:
+            log.exception("agent %s: run %s could not start", self.name, message.get("run_id"))
+            with contextlib.suppress(Exception):
+                reason = "could not start: internal error (see the server's log)"
+                await self._end_run(message["run_id"], "failed", None, reason)
+
+    async def _start_run(self, message: dict) -> None:
         run_id = message["run_id"]
         # Only a run still waiting to start: not one marked lost or failed meanwhile.
         if not await database_sync_to_async(Run.claim)(run_id):
