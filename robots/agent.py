@@ -1,9 +1,10 @@
 """The robot agent: the only process that owns a robot's hardware and its programs.
 
 It takes commands from the channel layer (run.start, run.stop, robot.estop, robot.sensors,
-robot.state, robot.camera), serves the Robot API socket to the programs it launched, and publishes their
-output, the run states and the robot's telemetry to groups. Embedded mode runs one agent per
-robot inside the web server process (AgentManager); fleet mode runs `robotide agent NAME`.
+robot.state, robot.camera), serves the Robot API socket to the programs it launched, and
+publishes their output, the run states and the robot's telemetry to groups. Embedded mode runs
+one agent per robot inside the web server process (AgentManager); fleet mode runs
+`robotide agent NAME`.
 """
 
 import asyncio
