@@ -19,6 +19,7 @@ from rhal.errors import DriverUnavailableError, UnknownDriverError
 #: URL scheme -> (module, class name) of its driver.
 DRIVERS: dict[str, tuple[str, str]] = {
     "sim": ("rhal.sim", "SimRobot"),
+    "dtmf": ("rhal.dtmf", "DtmfRobot"),
 }
 
 

@@ -136,7 +136,10 @@ class RobotAgent:
         if self.driver is not None:
             with contextlib.suppress(Exception):
                 await self.driver.stop()
-            await self.driver.close()
+            try:
+                await self.driver.close()
+            except Exception:  # the rest of the shutdown must happen all the same
+                log.exception("agent %s: closing the robot failed", self.name)
         for task in self._tasks:
             task.cancel()
         # Deliver what is queued (the final run states) before going away.
