@@ -20,6 +20,8 @@ from rhal.errors import DriverUnavailableError, UnknownDriverError
 DRIVERS: dict[str, tuple[str, str]] = {
     "sim": ("rhal.sim", "SimRobot"),
     "dtmf": ("rhal.dtmf", "DtmfRobot"),
+    "pioneer": ("rhal.pioneer", "PioneerRobot"),
+    "pioneer+tcp": ("rhal.pioneer", "PioneerRobot"),
 }
 
 

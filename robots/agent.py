@@ -303,7 +303,10 @@ class RobotAgent:
     async def estop(self) -> int:
         stopped = sum(self.stop_run(run_id, "emergency stop") for run_id in list(self.runs))
         self.motion_owner = None
-        await self.driver.stop()
+        try:
+            await self.driver.stop()
+        except rhal.RhalError:  # link down: the robot's own watchdog stops it
+            log.exception("agent %s: emergency stop could not reach the robot", self.name)
         return stopped
 
     # -- publishing -------------------------------------------------------------------------

@@ -1,0 +1,379 @@
+"""Pioneer P3-DX/P3-AT and other ARCOS/P2OS robots, for ``pioneer://`` URLs.
+
+    pioneer:///dev/ttyUSB0?baud=9600    a serial port, 8N1 (default device /dev/ttyUSB0)
+    pioneer+tcp://127.0.0.1:8101        TCP, where MobileSim and AMRISim listen (the default)
+
+Options, also accepted in the URL query: ``baud`` (serial only, default 9600, the ARCOS
+default), ``timeout`` (s without a packet from the robot before the link counts as lost,
+default 2), ``pulse`` (s between keep-alives, default 1), ``compass`` (true if a compass is
+fitted: heading then comes from it instead of odometry), ``sonars`` (sonar discs, default 8),
+``max_linear``, ``max_angular``.
+
+Serial goes through pyserial-asyncio's streams and TCP through asyncio's, so after connecting
+both are one StreamReader/StreamWriter pair and nothing blocks the event loop.
+
+A link's life: SYNC0-2 handshake, OPEN, ENABLE motors, then a reader that parses SIPs and a
+keep-alive. If the link drops or the robot goes quiet, callers get RobotConnectionError while
+the driver reconnects with backoff and handshakes again. Motion is not resumed after a
+reconnection: the program must ask again, knowing it lost the robot for a while.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import time
+from collections import deque
+from typing import Any
+from urllib.parse import urlsplit
+
+import serial_asyncio
+
+from rhal import arcos
+from rhal.base import Robot
+from rhal.errors import RobotConnectionError
+from rhal.kinematics import compass_heading
+
+DEFAULT_DEVICE = "/dev/ttyUSB0"
+DEFAULT_HOST, DEFAULT_TCP_PORT = "127.0.0.1", 8101
+SONAR_MAX = 5.0  # m, the Pioneer sonar's reach
+FRONT_SONARS = (3, 4)  # the discs at -10 and +10 degrees on the P3 front ring
+VELOCITY_REFRESH = 0.5  # s: while moving, re-send the speeds this often, so one packet lost
+# on a noisy line cannot leave the robot on an old speed
+KEEPALIVE_TICK = 0.1  # s
+SYNC_WAIT = 0.5  # s to wait for each handshake reply before starting over
+BACKOFF_FIRST, BACKOFF_MAX = 0.2, 5.0  # s between reconnection attempts, doubling
+
+
+class PioneerRobot(Robot):
+    kind = "pioneer"
+    quick = False  # every call waits on the link
+
+    def __init__(
+        self,
+        url: str = "pioneer+tcp://",
+        *,
+        baud: int = 9600,
+        timeout: float = 2.0,
+        pulse: float = 1.0,
+        compass: bool = False,
+        sonars: int = 8,
+        **limits: Any,
+    ) -> None:
+        super().__init__(url, **limits)
+        self.device, self.address = _parse_url(url)
+        self.baud = _positive(int, "baud", baud)
+        self.timeout = _positive(float, "timeout", timeout)
+        self.pulse = _positive(float, "pulse", pulse)
+        self.compass = bool(compass)
+        self.sonars = _positive(int, "sonars", sonars)
+        #: name, class and subclass the robot gave in its SYNC2 reply
+        self.identity: dict[str, str] = {}
+        self._parser = arcos.PacketParser()
+        self._bad_sips = 0
+        self._link: _Link | None = None
+        self._lost = "not connected yet"  # why self._link is None
+        self._task: asyncio.Task[None] | None = None
+        self._command = (0, 0)  # mm/s, deg/s: what the robot was last told
+        self._velocity_sent = self._pulse_sent = 0.0
+        self._reset_readings()
+
+    @property
+    def errors(self) -> int:
+        """Packets dropped so far: noise, bad checksums, truncated packets, short SIPs."""
+        return self._parser.errors + self._bad_sips
+
+    @property
+    def connected(self) -> bool:
+        return self._link is not None
+
+    # -- hooks -----------------------------------------------------------------------------
+
+    async def _open(self) -> None:
+        self._link = await self._connect()
+        self._task = asyncio.create_task(self._maintain(), name=f"pioneer link {self.url}")
+
+    async def _close(self) -> None:
+        task, self._task = self._task, None
+        if task is not None:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        link, self._link = self._link, None
+        self._lost = "closed"
+        if link is not None:
+            # Best effort, and bounded: a robot that stopped reading must not hang close().
+            with contextlib.suppress(OSError):  # TimeoutError is an OSError
+                async with asyncio.timeout(self.timeout):
+                    await link.send(arcos.encode(arcos.CLOSE))
+            await link.close()
+
+    async def _drive(self, linear: float, angular: float) -> None:
+        # Set before sending: the keep-alive re-sends self._command and must never re-send an
+        # older speed after this one.
+        self._command = (round(linear * 1000.0), round(math.degrees(angular)))
+        self._velocity_sent = time.monotonic()
+        await self._send(self._velocity_packets())
+
+    async def _stop(self) -> None:
+        try:
+            await self._drive(0.0, 0.0)
+        except RobotConnectionError:
+            # While closing, a lost link is no reason to fail: the robot's watchdog stops it.
+            if self.is_open:
+                raise
+
+    async def _read_sensors(self) -> dict[str, Any]:
+        sip = self._sip
+        if self._link is None or sip is None:
+            raise self._lost_error()
+        x, y, theta = self._pose
+        if self.compass:
+            heading = None if sip.compass is None else float(sip.compass)
+        else:
+            heading = compass_heading(theta)
+        front = [self._sonar[i] for i in FRONT_SONARS if i < self.sonars]
+        front = [reading for reading in front if reading is not None]
+        return {
+            "position": {"x": x, "y": y, "theta": theta},
+            "velocity": {"left": sip.left / 1000.0, "right": sip.right / 1000.0},
+            "heading": heading,
+            "range": min(front) if front else None,
+            "sonar": list(self._sonar),
+            "bumper": sip.bumpers != 0,
+            "stall": sip.stall_left or sip.stall_right,
+            "battery": sip.battery,
+            "motors": sip.motors,
+            "errors": self.errors,
+        }
+
+    def _sensor_specs(self) -> dict[str, dict[str, Any]]:
+        return {
+            "position": {"unit": {"x": "m", "y": "m", "theta": "rad"}, "source": "odometry"},
+            "velocity": {"unit": {"left": "m/s", "right": "m/s"}},
+            "heading": {"unit": "deg", "source": "compass" if self.compass else "odometry"},
+            "range": {"unit": "m", "max": SONAR_MAX, "sonars": list(FRONT_SONARS)},
+            "sonar": {"unit": "m", "max": SONAR_MAX, "count": self.sonars},
+            "bumper": {"unit": "bool"},
+            "stall": {"unit": "bool"},
+            "battery": {"unit": "V"},
+            "motors": {"unit": "bool"},
+            "errors": {"unit": "count"},
+        }
+
+    # -- the link --------------------------------------------------------------------------
+
+    async def _connect(self) -> _Link:
+        """Open the link, handshake, open the server, enable the motors, read a first SIP."""
+        if self.address is not None:
+            reader, writer = await asyncio.open_connection(*self.address)
+        else:
+            reader, writer = await serial_asyncio.open_serial_connection(
+                url=self.device, baudrate=self.baud
+            )
+        link = _Link(reader, writer, self._parser)
+        deadline = 3 * self.timeout
+        try:
+            async with asyncio.timeout(deadline):
+                await self._handshake(link)
+                await link.send(arcos.encode(arcos.OPEN) + arcos.encode(arcos.ENABLE, 1))
+                self._reset_readings()
+                while self._sip is None:
+                    self._take(await link.packet())
+        except TimeoutError:
+            await link.close()
+            raise RobotConnectionError(
+                f"no ARCOS robot answered at {self.url!r} within {deadline:g} s"
+            ) from None
+        except BaseException:
+            await link.close()
+            raise
+        self._command = (0, 0)
+        self._pulse_sent = time.monotonic()
+        return link
+
+    async def _handshake(self, link: _Link) -> None:
+        step = arcos.SYNC0
+        while step <= arcos.SYNC2:
+            await link.send(arcos.encode(step))
+            reply = await _sync_reply(link, step)
+            if reply is None:
+                step = arcos.SYNC0  # a reply was lost or out of order: ARCOS starts over too
+                continue
+            if step == arcos.SYNC2:
+                parts = reply[1:].split(b"\0") + [b"", b"", b""]
+                names = [part.decode("latin-1") for part in parts[:3]]
+                self.identity = dict(zip(("name", "class", "subclass"), names, strict=True))
+            step += 1
+
+    async def _maintain(self) -> None:
+        """Serve the link until it fails, then reconnect with backoff; until cancelled."""
+        link = self._link
+        while link is not None:
+            reason = await self._serve(link)
+            self._link, self._lost = None, reason
+            self._command = (0, 0)
+            await link.close()
+            link = await self._reconnect()
+            self._link = link
+
+    async def _serve(self, link: _Link) -> str:
+        """Read packets until the link fails; return why it did."""
+        keepalive = asyncio.create_task(self._keep_alive(link))
+        try:
+            while True:
+                self._take(await link.packet(self.timeout))
+        except TimeoutError:
+            return f"no data from the robot for {self.timeout:g} s"
+        except OSError as exc:  # EOF, reset, a vanished serial device, a failed write
+            return str(exc) or type(exc).__name__
+        finally:
+            keepalive.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await keepalive
+
+    async def _reconnect(self) -> _Link:
+        delay = BACKOFF_FIRST
+        while True:
+            await asyncio.sleep(delay)
+            try:
+                return await self._connect()
+            except (OSError, RobotConnectionError) as exc:
+                self._lost = f"reconnecting failed: {exc}"
+                delay = min(2 * delay, BACKOFF_MAX)
+
+    async def _keep_alive(self, link: _Link) -> None:
+        """PULSE for the robot's watchdog, which stops the motors after ~2 s of silence."""
+        while True:
+            await asyncio.sleep(KEEPALIVE_TICK)
+            now = time.monotonic()
+            packets = b""
+            if self._command != (0, 0) and now - self._velocity_sent >= VELOCITY_REFRESH:
+                packets += self._velocity_packets()
+                self._velocity_sent = now
+            if now - self._pulse_sent >= self.pulse:
+                packets += arcos.encode(arcos.PULSE)
+                self._pulse_sent = now
+            if packets:
+                try:
+                    await link.send(packets)
+                except OSError:
+                    link.abort()  # the reader sees it and starts reconnecting
+                    return
+
+    async def _send(self, packets: bytes) -> None:
+        link = self._link
+        if link is None:
+            raise self._lost_error()
+        try:
+            await link.send(packets)
+        except OSError as exc:
+            link.abort()
+            raise RobotConnectionError(f"lost the link to {self.url!r}: {exc}") from exc
+
+    def _velocity_packets(self) -> bytes:
+        linear, angular = self._command
+        return arcos.encode(arcos.VEL, linear) + arcos.encode(arcos.RVEL, angular)
+
+    def _lost_error(self) -> RobotConnectionError:
+        return RobotConnectionError(
+            f"no link to the pioneer robot at {self.url!r} ({self._lost}); reconnecting"
+        )
+
+    # -- readings --------------------------------------------------------------------------
+
+    def _reset_readings(self) -> None:
+        self._sip: arcos.Sip | None = None
+        self._odometry = arcos.Odometry()
+        self._pose = (0.0, 0.0, 0.0)
+        self._sonar: list[float | None] = [None] * self.sonars
+
+    def _take(self, body: bytes) -> None:
+        if not arcos.is_sip(body):
+            return  # configuration, encoder and I/O packets: nothing here asks for them
+        try:
+            sip = arcos.parse_sip(body)
+        except ValueError:
+            self._bad_sips += 1
+            return
+        self._pose = self._odometry.update(sip)
+        for number, millimetres in sip.sonar.items():
+            if number < self.sonars:
+                self._sonar[number] = millimetres / 1000.0
+        self._sip = sip
+
+
+class _Link:
+    """One connection's streams, cut into packets."""
+
+    def __init__(
+        self,
+        reader: asyncio.StreamReader,
+        writer: asyncio.StreamWriter,
+        parser: arcos.PacketParser,
+    ) -> None:
+        self._reader, self._writer, self._parser = reader, writer, parser
+        self._pending: deque[bytes] = deque()
+        parser.reset()
+
+    async def packet(self, timeout: float | None = None) -> bytes:
+        """The next valid packet body; TimeoutError, or OSError when the link is gone."""
+        while not self._pending:
+            async with asyncio.timeout(timeout):
+                data = await self._reader.read(4096)
+            if not data:
+                raise ConnectionResetError("the robot closed the link")
+            self._pending.extend(self._parser.feed(data))
+        return self._pending.popleft()
+
+    async def send(self, data: bytes) -> None:
+        if self._writer.is_closing():
+            raise ConnectionResetError("the link is closed")
+        self._writer.write(data)
+        await self._writer.drain()
+
+    def abort(self) -> None:
+        self._writer.transport.abort()
+
+    async def close(self) -> None:
+        self._writer.close()
+        with contextlib.suppress(OSError):
+            await self._writer.wait_closed()
+
+
+async def _sync_reply(link: _Link, step: int) -> bytes | None:
+    """The robot's echo of SYNC ``step``, or None if it did not come in time."""
+    with contextlib.suppress(TimeoutError):
+        async with asyncio.timeout(SYNC_WAIT):
+            while True:
+                body = await link.packet()
+                if body[0] == step:
+                    return body
+                if arcos.is_sip(body):
+                    # Still open for an earlier client (this one, before a crash): close it.
+                    await link.send(arcos.encode(arcos.CLOSE))
+                    return None
+                # Anything else is a stale echo of an earlier try: skip it.
+    return None
+
+
+def _parse_url(url: str) -> tuple[str | None, tuple[str, int] | None]:
+    """``(serial device, None)`` or ``(None, (host, port))``."""
+    parts = urlsplit(url)
+    scheme = parts.scheme.lower()
+    if scheme == "pioneer+tcp":
+        return None, (parts.hostname or DEFAULT_HOST, parts.port or DEFAULT_TCP_PORT)
+    if scheme == "pioneer":
+        # pioneer://COM3 names a Windows port in the host part.
+        return (parts.netloc + parts.path) or DEFAULT_DEVICE, None
+    raise ValueError(f"not a pioneer URL: {url!r}; use pioneer:///dev/... or pioneer+tcp://")
+
+
+def _positive(kind: type, name: str, value: Any) -> Any:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    result = kind(value)
+    if not result > 0:
+        raise ValueError(f"{name} must be greater than 0, got {value!r}")
+    return result
