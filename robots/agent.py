@@ -50,6 +50,7 @@ TELEMETRY_INTERVAL = 0.25
 HEARTBEAT_INTERVAL = 5.0
 SHOWS_SNAPSHOT_EVERY = 4  # telemetry ticks
 RETRY_DELAY = 1.0
+LINK_RETRY_MAX = 30.0  # seconds between tries to open a robot that is away
 
 
 @dataclass
@@ -73,6 +74,7 @@ class RobotAgent:
         self._shows_snapshot_due = True
         self.layer = get_channel_layer()
         self.driver: rhal.Robot | None = None
+        self.link_error: str | None = None
         self.api = RobotApi(self)
         # A short private folder: Unix socket paths are limited to 107 bytes.
         self.socket_dir = Path(tempfile.mkdtemp(prefix="robotide-"))
@@ -105,7 +107,7 @@ class RobotAgent:
             isolation=self.isolation.describe() if self.isolation else self.isolation_error
         )
         self.driver = rhal.connect(robot.url, **robot.driver_options())
-        await self.driver.open()
+        await self.open_robot()
         self.units = flat_units(self.driver.capabilities().get("sensors", {}))
         lost = await database_sync_to_async(Run.mark_lost)(self.name)
         for run_id in lost:
@@ -119,9 +121,32 @@ class RobotAgent:
             asyncio.create_task(self._receive_loop(), name=f"{self.name}-receive"),
             asyncio.create_task(self._publish_loop(), name=f"{self.name}-publish"),
             asyncio.create_task(self._telemetry_loop(), name=f"{self.name}-telemetry"),
+            asyncio.create_task(self._keep_robot_open(), name=f"{self.name}-link"),
         ]
         self.ready.set()
         log.info("agent %s: %s, Robot API on %s", self.name, robot.url, self.api_address)
+
+    async def open_robot(self) -> bool:
+        """Open the robot's link; a robot away (unplugged, not yet on) is no reason to stop
+        serving: its agent answers with the reason and tries again."""
+        try:
+            await self.driver.open()
+        except rhal.RhalError as exc:
+            if str(exc) != self.link_error:
+                log.error("agent %s: cannot open the robot: %s", self.name, exc)
+            self.link_error = str(exc)
+            return False
+        self.link_error = None
+        return True
+
+    async def _keep_robot_open(self) -> None:
+        delay = 1.0
+        while True:
+            await asyncio.sleep(delay)
+            if self.driver.is_open or await self.open_robot():
+                delay = 1.0
+            else:
+                delay = min(delay * 2, LINK_RETRY_MAX)
 
     async def shutdown(self) -> None:
         if self._starting:  # let starts under way finish, so their programs are stopped too
@@ -160,6 +185,9 @@ class RobotAgent:
                 continue
             try:
                 await self.dispatch(message)
+            except rhal.RhalError as exc:  # the robot away: say why, at once
+                why = f"not connected ({self.link_error})" if self.link_error else str(exc)
+                await self.reply(message, {"error": f"robot {self.name}: {why}"})
             except Exception:
                 log.exception("agent %s: %s failed", self.name, message.get("type"))
                 await self.reply(message, {"error": f"agent failed on {message.get('type')}"})
@@ -444,6 +472,28 @@ class AgentManager:
                 continue
             if message.get("type") == "robot.added":
                 self.start_agent(message["name"])
+
+    async def open_robot(self) -> bool:
+        """Open the robot's link; a robot away (unplugged, not yet on) is no reason to stop
+        serving: its agent answers with the reason and tries again."""
+        try:
+            await self.driver.open()
+        except rhal.RhalError as exc:
+            if str(exc) != self.link_error:
+                log.error("agent %s: cannot open the robot: %s", self.name, exc)
+            self.link_error = str(exc)
+            return False
+        self.link_error = None
+        return True
+
+    async def _keep_robot_open(self) -> None:
+        delay = 1.0
+        while True:
+            await asyncio.sleep(delay)
+            if self.driver.is_open or await self.open_robot():
+                delay = 1.0
+            else:
+                delay = min(delay * 2, LINK_RETRY_MAX)
 
     async def shutdown(self) -> None:
         if self._listener:

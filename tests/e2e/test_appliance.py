@@ -223,3 +223,21 @@ def test_a_program_may_call_the_robot_api_the_moment_it_starts(any_appliance):
     runs = [app.run_program(program["id"])["id"] for _ in range(12)]
     states = [app.wait_run(run_id)["state"] for run_id in runs]
     assert states == ["finished"] * len(runs)
+
+
+def test_a_robot_that_is_away_is_reported_not_waited_for(any_appliance):
+    app = any_appliance
+    name = f"away{app.mode}"
+    body = {"name": name, "url": "pioneer+tcp://127.0.0.1:1"}  # nothing listens there
+    assert app.api("POST", "/api/robots", body).status_code == 201
+    if app.mode == "split":
+        app._spawn("agent", name)
+    response = wait_for(
+        lambda: (
+            (r := app.api("GET", f"/api/robots/{name}/sensors")).status_code == 503
+            and "cannot" in r.json()["detail"]
+            and r
+        ),
+        what="the agent to report its robot away",
+    )
+    assert name in response.json()["detail"]
