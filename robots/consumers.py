@@ -30,6 +30,8 @@ class RobotConsumer(AsyncWebsocketConsumer):
         self.group = robot_group(self.robot.name)
         await self.channel_layer.group_add(self.group, self.channel_name)
         await self.accept()
+        # What ran or ended between the page's render and this connection.
+        await self.robot_runs({})
 
     async def disconnect(self, code):
         if getattr(self, "group", None):

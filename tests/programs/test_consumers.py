@@ -87,6 +87,9 @@ async def test_robot_page_shows_svg_only_as_an_image():
     alice, _, _ = await make_run(b"")
     comm = communicator(RobotConsumer, "/ws/robots/sim/", alice, name="sim")
     assert (await comm.connect())[0]
+    # First what runs there now: the page may have missed a change since it was rendered.
+    running = await comm.receive_from(timeout=3)
+    assert 'id="robot-running"' in running and 'p</a> <span class="state starting">' in running
     svg = '<svg xmlns="http://www.w3.org/2000/svg"><script>alert(1)</script></svg>'
     event = {
         "type": "robot.telemetry",
