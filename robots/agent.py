@@ -473,28 +473,6 @@ class AgentManager:
             if message.get("type") == "robot.added":
                 self.start_agent(message["name"])
 
-    async def open_robot(self) -> bool:
-        """Open the robot's link; a robot away (unplugged, not yet on) is no reason to stop
-        serving: its agent answers with the reason and tries again."""
-        try:
-            await self.driver.open()
-        except rhal.RhalError as exc:
-            if str(exc) != self.link_error:
-                log.error("agent %s: cannot open the robot: %s", self.name, exc)
-            self.link_error = str(exc)
-            return False
-        self.link_error = None
-        return True
-
-    async def _keep_robot_open(self) -> None:
-        delay = 1.0
-        while True:
-            await asyncio.sleep(delay)
-            if self.driver.is_open or await self.open_robot():
-                delay = 1.0
-            else:
-                delay = min(delay * 2, LINK_RETRY_MAX)
-
     async def shutdown(self) -> None:
         if self._listener:
             self._listener.cancel()
