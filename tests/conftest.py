@@ -4,6 +4,9 @@ import pytest
 
 from tests.appliance import Appliance
 
+# The `agent` fixture: a real Robot API server for tests of the API and its clients.
+pytest_plugins = ["tests.robot_api_server"]
+
 
 @pytest.fixture(autouse=True)
 def _test_settings(settings, tmp_path):

@@ -6,20 +6,19 @@ served on the test's event loop."""
 import asyncio
 import json
 import re
-import shutil
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
-import rhal
 from programs import launcher
 from programs.languages import CLIENTS_DIR, LANGUAGES
-from robots.agent import ActiveRun, RobotAgent
 
 sys.path.insert(0, str(CLIENTS_DIR / "python"))
 import robot as robot_client  # noqa: E402  (the client programs get on their path)
+
+from tests.robot_api_server import admit
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "programs" / "examples"
 TOKEN = "good-token"
@@ -27,16 +26,9 @@ EXTENSIONS = {"python": ".py", "javascript": ".js", "shell": ".sh"}
 
 
 @pytest.fixture
-async def agent():
-    agent = RobotAgent("sim")
-    agent.driver = rhal.connect("sim://", max_linear=0.5)
-    await agent.driver.open()
-    agent.api_address = await agent.server.start()
-    agent.tokens[TOKEN] = agent.runs[7] = ActiveRun(7, TOKEN, process=None)
-    yield agent
-    await agent.server.close()
-    await agent.driver.close()
-    shutil.rmtree(agent.socket_dir)
+async def agent(agent):
+    admit(agent, TOKEN, 7)  # every test here runs as run 7
+    return agent
 
 
 @dataclass

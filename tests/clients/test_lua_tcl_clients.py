@@ -6,14 +6,12 @@ import json
 import math
 import os
 import re
-import shutil
 from pathlib import Path
 
 import pytest
 
-import rhal
 from programs.languages import CLIENTS_DIR
-from robots.agent import ActiveRun, RobotAgent
+from tests.robot_api_server import admit
 
 EXAMPLES = CLIENTS_DIR.parent / "examples"
 
@@ -21,25 +19,6 @@ EXAMPLES = CLIENTS_DIR.parent / "examples"
 LANGUAGES = {"lua": ("lua5.4", "lua"), "tcl": ("tclsh", "tcl"), "python": ("python3", "py")}
 
 each_language = pytest.mark.parametrize("language", ["lua", "tcl"])
-
-
-@pytest.fixture
-async def agent():
-    agent = RobotAgent("sim")
-    agent.driver = rhal.connect("sim://", max_linear=0.5)
-    await agent.driver.open()
-    agent.api_address = await agent.server.start()
-    yield agent
-    await agent.server.close()
-    await agent.driver.close()
-    shutil.rmtree(agent.socket_dir)
-
-
-def admit(agent, token="good-token", run_id=7) -> ActiveRun:
-    active = ActiveRun(run_id, token, process=None)
-    agent.tokens[token] = active
-    agent.runs[run_id] = active
-    return active
 
 
 async def start(agent, language, program: Path, token="good-token", api=None, tcp=None):

@@ -6,14 +6,12 @@ import json
 import math
 import os
 import re
-import shutil
 from pathlib import Path
 
 import pytest
 
-import rhal
 from programs.languages import CLIENTS_DIR
-from robots.agent import ActiveRun, RobotAgent
+from tests.robot_api_server import admit
 
 EXAMPLES = CLIENTS_DIR.parent / "examples"
 
@@ -25,25 +23,6 @@ LANGUAGES = {
 }
 
 each_language = pytest.mark.parametrize("language", ["perl", "ruby"])
-
-
-@pytest.fixture
-async def agent():
-    agent = RobotAgent("sim")
-    agent.driver = rhal.connect("sim://", max_linear=0.5)
-    await agent.driver.open()
-    agent.api_address = await agent.server.start()
-    yield agent
-    await agent.server.close()
-    await agent.driver.close()
-    shutil.rmtree(agent.socket_dir)
-
-
-def admit(agent, token="good-token", run_id=7) -> ActiveRun:
-    active = ActiveRun(run_id, token, process=None)
-    agent.tokens[token] = active
-    agent.runs[run_id] = active
-    return active
 
 
 async def start(agent, language, program: Path, token="good-token", address=None):

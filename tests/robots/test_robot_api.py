@@ -2,36 +2,16 @@
 
 import asyncio
 import json
-import shutil
 import sys
 
 import pytest
 
-import rhal
 from programs.languages import CLIENTS_DIR
-from robots.agent import ActiveRun, RobotAgent
 
 sys.path.insert(0, str(CLIENTS_DIR / "python"))
 import robot as robot_client  # noqa: E402  (the client programs get on their path)
 
-
-@pytest.fixture
-async def agent():
-    agent = RobotAgent("sim")
-    agent.driver = rhal.connect("sim://", max_linear=0.5)
-    await agent.driver.open()
-    agent.api_address = await agent.server.start()
-    yield agent
-    await agent.server.close()
-    await agent.driver.close()
-    shutil.rmtree(agent.socket_dir)
-
-
-def admit(agent, token="good-token", run_id=7) -> ActiveRun:
-    active = ActiveRun(run_id, token, process=None)
-    agent.tokens[token] = active
-    agent.runs[run_id] = active
-    return active
+from tests.robot_api_server import admit
 
 
 def end(agent, active):
