@@ -3,15 +3,13 @@ real agent's Robot API server and sim robot."""
 
 import asyncio
 import json
-import math
 import os
-import re
 from pathlib import Path
 
 import pytest
 
 from programs.languages import CLIENTS_DIR
-from tests.robot_api_server import admit
+from tests.robot_api_server import admit, check_wall_turn
 
 EXAMPLES = CLIENTS_DIR.parent / "examples"
 
@@ -313,15 +311,4 @@ async def test_the_wall_turn_example(agent, language):
     admit(agent)
     program = EXAMPLES / f"wall_turn.{LANGUAGES[language][1]}"
     status, out, err = await finish(await start(agent, language, program), timeout=60)
-    assert status == 0, err
-    match = re.fullmatch(r"heading: (-?\d+\.\d)\n", out)
-    assert match, out
-    printed = float(match.group(1))
-    shown = agent.shows["heading"]["value"]
-    assert type(shown) in (int, float) and shown == printed  # a number, not a text (Perl: 274)
-    after = await agent.driver.sensors()
-    assert after["velocity"] == {"linear": 0.0, "angular": 0.0}  # stopped
-    assert abs(after["heading"] - printed) <= 0.05 + 1e-9
-    assert after["position"]["y"] > 1.0 and not after["bumper"]  # drove ahead, hit nothing
-    turned = (after["position"]["theta"] - math.pi / 2) % math.tau
-    assert 1.0 < turned < math.pi  # about 1.5 rad to the left
+    await check_wall_turn(agent, status, out, err)
