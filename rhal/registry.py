@@ -22,6 +22,11 @@ DRIVERS: dict[str, tuple[str, str]] = {
     "dtmf": ("rhal.dtmf", "DtmfRobot"),
     "pioneer": ("rhal.pioneer", "PioneerRobot"),
     "pioneer+tcp": ("rhal.pioneer", "PioneerRobot"),
+    "nxt": ("rhal.nxt_brick", "NxtRobot"),
+    "mavlink": ("rhal.mavlink", "MavlinkRobot"),
+    "mavlink+tcp": ("rhal.mavlink", "MavlinkRobot"),
+    "mavlink+udp": ("rhal.mavlink", "MavlinkRobot"),
+    "can": ("rhal.canbus", "CanRobot"),
 }
 
 
