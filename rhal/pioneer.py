@@ -7,7 +7,8 @@ Options, also accepted in the URL query: ``baud`` (serial only, default 9600, th
 default), ``timeout`` (s without a packet from the robot before the link counts as lost,
 default 2), ``pulse`` (s between keep-alives, default 1), ``compass`` (true if a compass is
 fitted: heading then comes from it instead of odometry), ``sonars`` (sonar discs, default 8),
-``max_linear``, ``max_angular``.
+``track`` (m, the effective wheel track turning wheel speeds into a turn rate: 0.357 for a
+P3-DX, the default, and about 0.59 for a skid-steered P3-AT), ``max_linear``, ``max_angular``.
 
 Serial goes through pyserial-asyncio's streams and TCP through asyncio's, so after connecting
 both are one StreamReader/StreamWriter pair and nothing blocks the event loop.
@@ -59,6 +60,7 @@ class PioneerRobot(Robot):
         pulse: float = 1.0,
         compass: bool = False,
         sonars: int = 8,
+        track: float = 0.357,
         **limits: Any,
     ) -> None:
         super().__init__(url, **limits)
@@ -68,6 +70,7 @@ class PioneerRobot(Robot):
         self.pulse = _positive(float, "pulse", pulse)
         self.compass = bool(compass)
         self.sonars = _positive(int, "sonars", sonars)
+        self.track = _positive(float, "track", track)
         #: name, class and subclass the robot gave in its SYNC2 reply
         self.identity: dict[str, str] = {}
         self._parser = arcos.PacketParser()
@@ -135,9 +138,11 @@ class PioneerRobot(Robot):
             heading = compass_heading(theta)
         front = [self._sonar[i] for i in FRONT_SONARS if i < self.sonars]
         front = [reading for reading in front if reading is not None]
+        left, right = sip.left / 1000.0, sip.right / 1000.0
         return {
             "position": {"x": x, "y": y, "theta": theta},
-            "velocity": {"left": sip.left / 1000.0, "right": sip.right / 1000.0},
+            "velocity": {"linear": (left + right) / 2.0, "angular": (right - left) / self.track},
+            "wheels": {"left": left, "right": right},
             "heading": heading,
             "range": min(front) if front else None,
             "sonar": list(self._sonar),
@@ -151,7 +156,8 @@ class PioneerRobot(Robot):
     def _sensor_specs(self) -> dict[str, dict[str, Any]]:
         return {
             "position": {"unit": {"x": "m", "y": "m", "theta": "rad"}, "source": "odometry"},
-            "velocity": {"unit": {"left": "m/s", "right": "m/s"}},
+            "velocity": {"unit": {"linear": "m/s", "angular": "rad/s"}, "source": "wheels"},
+            "wheels": {"unit": {"left": "m/s", "right": "m/s"}},
             "heading": {"unit": "deg", "source": "compass" if self.compass else "odometry"},
             "range": {"unit": "m", "max": SONAR_MAX, "sonars": list(FRONT_SONARS)},
             "sonar": {"unit": "m", "max": SONAR_MAX, "count": self.sonars},

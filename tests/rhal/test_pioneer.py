@@ -195,7 +195,8 @@ async def test_sip_fields_are_parsed(robot, emulator):
     assert readings["position"] == pytest.approx(
         {"x": 1.234, "y": -0.5, "theta": math.radians(30)}, abs=2e-3
     )
-    assert readings["velocity"] == {"left": 0.1, "right": -0.3}
+    assert readings["wheels"] == {"left": 0.1, "right": -0.3}
+    assert readings["velocity"] == pytest.approx({"linear": -0.1, "angular": -0.4 / 0.357})
     assert readings["battery"] == pytest.approx(12.3)
     assert readings["range"] == pytest.approx(1.3)  # min of sonars 3 and 4
     assert readings["bumper"] is True and readings["stall"] is True
