@@ -24,6 +24,11 @@ class Robot(abc.ABC):
     #: True if every method answers without waiting on anything (no I/O): its callers may
     #: then skip a task per call. A driver that talks to hardware leaves it False.
     quick = False
+    #: What each option means, for forms and docs (see rhal.options).
+    option_help: dict[str, str] = {
+        "max_linear": "speed limit, m/s: faster drive() calls are clamped to it",
+        "max_angular": "turn-rate limit, rad/s",
+    }
 
     def __init__(self, url: str, *, max_linear: float = 0.5, max_angular: float = 2.0) -> None:
         self.url = url

@@ -134,6 +134,18 @@ def motor_state(
 
 class DtmfRobot(Robot):
     kind = "dtmf"
+    option_help = {
+        **Robot.option_help,
+        "wav": "record the tones to this WAV file instead of playing them",
+        "device": "sound device name or index (blank: the system's output)",
+        "sample_rate": "Hz (blank: 8000 for a WAV, 44100 for a device)",
+        "tone_ms": "length of each tone, ms",
+        "gap_ms": "silence between tones, ms",
+        "amplitude": "tone level, 0..1 of full scale",
+        "table": "digit table: mt8870, or state:digit pairs (forward:2,back:8,...)",
+        "deadband": "fraction of the speed limits below which drive() means stop",
+        "stop_repeats": "times the stop digit is sent on each stop",
+    }
 
     def __init__(
         self,

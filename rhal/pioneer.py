@@ -50,6 +50,15 @@ BACKOFF_FIRST, BACKOFF_MAX = 0.2, 5.0  # s between reconnection attempts, doubli
 class PioneerRobot(Robot):
     kind = "pioneer"
     quick = False  # every call waits on the link
+    option_help = {
+        **Robot.option_help,
+        "baud": "serial speed, bit/s (ignored on TCP)",
+        "timeout": "s without a packet before the link counts as lost",
+        "pulse": "s between keep-alive PULSEs for the robot's watchdog",
+        "compass": "a compass is fitted: heading comes from it instead of odometry",
+        "sonars": "sonar discs on the robot (16 with the rear ring)",
+        "track": "m, effective wheel track: 0.357 for a P3-DX, about 0.59 for a P3-AT",
+    }
 
     def __init__(
         self,

@@ -36,13 +36,17 @@ def connect(url: str, **options: Any) -> Robot:
     Options from the URL's query string are merged with ``options``; keyword options win.
     An option the driver does not take raises TypeError, as for any Python call.
     """
-    parts = urlsplit(url)
-    scheme = parts.scheme.lower()
+    driver = driver_class(url)
+    return driver(url, **{**parse_query_options(urlsplit(url).query), **options})
+
+
+def driver_class(url: str) -> type[Robot]:
+    """The driver class for ``url``'s scheme, imported now."""
+    scheme = urlsplit(url).scheme.lower()
     if scheme not in DRIVERS:
         known = ", ".join(f"{name}://" for name in sorted(DRIVERS))
         raise UnknownDriverError(f"no robot driver for {url!r}; known schemes: {known}")
-    driver = _load_driver(scheme)
-    return driver(url, **{**parse_query_options(parts.query), **options})
+    return _load_driver(scheme)
 
 
 def parse_query_options(query: str) -> dict[str, Any]:

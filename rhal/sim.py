@@ -37,6 +37,8 @@ Pose = tuple[float, float, float]
 
 class SimRobot(Robot):
     kind = "sim"
+    option_help = {**Robot.option_help, "arena": "the walled arena the robot starts in"}
+    option_choices = {"arena": tuple(ARENAS)}
     quick = True  # computed in-process: nothing to wait for
 
     def __init__(

@@ -30,6 +30,7 @@ urlpatterns = [
     path("runs/<int:run_id>/stop", programs.run_stop, name="run-stop"),
     path("robots/", robots.robot_list, name="robot-list"),
     path("robots/<slug:name>/", robots.robot_detail, name="robot-detail"),
+    path("robots/<slug:name>/settings", robots.robot_settings, name="robot-settings"),
     path("robots/<slug:name>/estop", robots.robot_estop, name="robot-estop"),
     path("robots/<slug:name>/run", robots.robot_run, name="robot-run"),
     path("robots/<slug:name>/camera.jpg", robots.robot_camera, name="robot-camera"),

@@ -1,16 +1,57 @@
+from django import forms
 from django.contrib import admin
 
-from robots.bus import announce_robot_sync
-from robots.models import Robot
+from robots.bus import announce_robot_sync, reconfigure_sync
+from robots.driver_settings import current_values, option_field
+from robots.forms import RobotConfigForm
+from robots.models import RUN_SETTINGS, Robot
+
+
+class RobotAdminForm(RobotConfigForm):
+    """The robot page's typed driver options, plus the name and the run settings as JSON."""
+
+    run_settings = forms.JSONField(
+        required=False,
+        help_text=f"Settings of the programs run here, as JSON: {', '.join(RUN_SETTINGS)}",
+    )
+
+    class Meta(RobotConfigForm.Meta):
+        fields = ["name", "url", "description"]
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.fields["run_settings"].initial = self._run_settings()
+
+    def _run_settings(self) -> dict:
+        if self.is_bound and hasattr(self, "cleaned_data"):
+            given = self.cleaned_data.get("run_settings") or {}
+            unknown = set(given) - set(RUN_SETTINGS)
+            if unknown:
+                self.add_error("run_settings", f"not a run setting: {', '.join(sorted(unknown))}")
+            return {k: v for k, v in given.items() if k in RUN_SETTINGS}
+        return super()._run_settings()
 
 
 @admin.register(Robot)
 class RobotAdmin(admin.ModelAdmin):
+    form = RobotAdminForm
     list_display = ["name", "url", "description", "isolation", "last_seen"]
     readonly_fields = ["isolation", "last_seen"]
     search_fields = ["name", "url", "description"]
 
+    def get_form(self, request, obj=None, change=False, **kwargs):
+        # The admin lays out the fields a form class declares: declare this robot's options.
+        if obj is not None:
+            options = {
+                f"option_{r['option'].name}": option_field(r["option"], r["value"])
+                for r in current_values(obj)
+            }
+            kwargs["form"] = type("RobotOptionsAdminForm", (self.form,), options)
+        return super().get_form(request, obj, change, **kwargs)
+
     def save_model(self, request, obj, form, change):
         super().save_model(request, obj, form, change)
-        if not change:
+        if change:
+            reconfigure_sync(obj.name)
+        else:
             announce_robot_sync(obj.name)

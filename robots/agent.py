@@ -85,6 +85,7 @@ class RobotAgent:
             closed=self.api.forget,
         )
         self.ready = asyncio.Event()
+        self._opening = asyncio.Lock()
         self._outbox: asyncio.Queue = asyncio.Queue()
         self._tasks: list[asyncio.Task] = []
         self._starting: set[asyncio.Task] = set()
@@ -100,12 +101,7 @@ class RobotAgent:
             await self.shutdown()
 
     async def start(self) -> None:
-        robot = await database_sync_to_async(Robot.objects.get)(name=self.name)
-        self.limits = robot.run_limits(settings.RUN_DEFAULTS)
-        self.isolation, self.isolation_error = resolve_isolation(robot)
-        await database_sync_to_async(Robot.objects.filter(name=self.name).update)(
-            isolation=self.isolation.describe() if self.isolation else self.isolation_error
-        )
+        robot = await self._load_robot()
         self.driver = rhal.connect(robot.url, **robot.driver_options())
         await self.open_robot()
         self.units = flat_units(self.driver.capabilities().get("sensors", {}))
@@ -126,18 +122,54 @@ class RobotAgent:
         self.ready.set()
         log.info("agent %s: %s, Robot API on %s", self.name, robot.url, self.api_address)
 
+    async def _load_robot(self) -> Robot:
+        """The robot's row, and what it says about runs here."""
+        robot = await database_sync_to_async(Robot.objects.get)(name=self.name)
+        self.limits = robot.run_limits(settings.RUN_DEFAULTS)
+        self.isolation, self.isolation_error = resolve_isolation(robot)
+        await database_sync_to_async(Robot.objects.filter(name=self.name).update)(
+            isolation=self.isolation.describe() if self.isolation else self.isolation_error
+        )
+        return robot
+
+    async def reconfigure(self) -> None:
+        """Reopen the robot as its row says now (a new URL or new driver options).
+
+        Motion stops; programs keep running and see the robot again once it is open.
+        """
+        robot = await self._load_robot()
+        try:
+            driver = rhal.connect(robot.url, **robot.driver_options())
+        except (TypeError, ValueError, rhal.RhalError) as exc:  # the edit paths check first
+            log.error("agent %s: new settings refused, keeping the old: %s", self.name, exc)
+            return
+        old, self.driver, self.motion_owner = self.driver, driver, None
+        with contextlib.suppress(Exception):
+            await old.close()  # stops the motors first
+        self.units = flat_units(driver.capabilities().get("sensors", {}))
+        self.link_error = None
+        await self.open_robot()
+        log.info("agent %s: reopened as %s", self.name, robot.url)
+
     async def open_robot(self) -> bool:
         """Open the robot's link; a robot away (unplugged, not yet on) is no reason to stop
         serving: its agent answers with the reason and tries again."""
-        try:
-            await self.driver.open()
-        except rhal.RhalError as exc:
-            if str(exc) != self.link_error:
-                log.error("agent %s: cannot open the robot: %s", self.name, exc)
-            self.link_error = str(exc)
-            return False
+        async with self._opening:  # the link keeper and a reconfigure may both try
+            driver = self.driver
+            if driver.is_open:
+                return True
+            try:
+                await driver.open()
+            except rhal.RhalError as exc:
+                return self._open_failed(exc)
         self.link_error = None
         return True
+
+    def _open_failed(self, exc: rhal.RhalError) -> bool:
+        if str(exc) != self.link_error:
+            log.error("agent %s: cannot open the robot: %s", self.name, exc)
+        self.link_error = str(exc)
+        return False
 
     async def _keep_robot_open(self) -> None:
         delay = 1.0
@@ -210,6 +242,8 @@ class RobotAgent:
         elif kind == "robot.state":
             state = {"sensors": await self.driver.sensors(), "units": self.units}
             await self.reply(message, {**state, "shows": self.shows})
+        elif kind == "robot.reconfigure":
+            await self.reconfigure()
         elif kind == "robot.camera":
             await self.reply(message, {"jpeg": await self.driver.camera_jpeg()})
         else:
@@ -366,7 +400,6 @@ class RobotAgent:
         """Latest-state snapshots, throttled at the source; all shown values once a second."""
         last_heartbeat = 0.0
         loop = asyncio.get_running_loop()
-        units = self.units
         for tick in itertools.count():
             try:
                 sensors = await self.driver.sensors()
@@ -382,7 +415,7 @@ class RobotAgent:
                     "type": "robot.telemetry",
                     "robot": self.name,
                     "sensors": sensors,
-                    "units": units,
+                    "units": self.units,
                     "shows": shows,
                     "all_shows": full,  # a full snapshot replaces what the page shows
                 },

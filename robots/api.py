@@ -1,7 +1,5 @@
 import re
-from urllib.parse import urlsplit
 
-from django.conf import settings as django_settings
 from django.db import IntegrityError
 from ninja import Field, Router, Schema
 from ninja.errors import HttpError
@@ -10,9 +8,8 @@ from pydantic import field_validator, model_validator
 
 import rhal
 from programs.api import Error
-from programs.isolation import IsolationUnavailable, Policy
-from programs.launcher import Limits
-from robots.bus import announce_robot_sync, ask_agent_sync
+from robots.bus import announce_robot_sync, ask_agent_sync, reconfigure_sync
+from robots.driver_settings import check_settings, known_driver
 from robots.models import Robot, get_robot_for_user, robots_for_user
 
 robots_router = Router(tags=["robots"])
@@ -30,25 +27,18 @@ class RobotIn(Schema):
     @field_validator("url")
     @classmethod
     def known_driver(cls, value):
-        scheme = urlsplit(value).scheme.lower()
-        if scheme not in rhal.DRIVERS:
-            known = ", ".join(f"{name}://" for name in sorted(rhal.DRIVERS))
-            raise ValueError(f"no robot driver for {value!r}; known: {known}")
-        return value
+        return known_driver(value)
 
     @model_validator(mode="after")
     def usable_settings(self):
-        """Settings a robot's agent could not use are refused now, not found out later."""
-        robot = Robot(name=self.name, url=self.url, settings=self.settings)
-        try:
-            Limits.from_settings(self.settings.get("limits", {}))
-            Policy.from_settings(robot.run_isolation(django_settings.RUN_ISOLATION))
-            rhal.connect(self.url, **robot.driver_options())  # builds it, opens nothing
-        except (TypeError, ValueError, AttributeError, rhal.RhalError) as exc:
-            raise ValueError(f"settings: {exc}") from None
-        except IsolationUnavailable as exc:
-            raise ValueError(f"settings: {exc}") from None
+        check_settings(self.url, self.settings)
         return self
+
+
+class RobotPatch(Schema):
+    url: str | None = Field(None, min_length=1, max_length=500, json_schema_extra=DRIVER_URL)
+    settings: dict | None = None
+    description: str | None = Field(None, max_length=200)
 
 
 class RobotOut(Schema):
@@ -84,6 +74,26 @@ def create_robot(request, data: RobotIn):
 @robots_router.get("/{name}", response=RobotOut)
 def get_robot(request, name: str):
     return get_robot_for_user(request.user, name)
+
+
+@robots_router.patch("/{name}", response={200: RobotOut, 422: Error})
+def update_robot(request, name: str, data: RobotPatch):
+    """Change a robot's URL, settings or description; its agent reopens the robot with them."""
+    if not request.user.is_staff:
+        raise HttpError(403, "Only staff may change robots.")
+    robot = get_robot_for_user(request.user, name)
+    changes = data.dict(exclude_none=True)
+    url, settings = changes.get("url", robot.url), changes.get("settings", robot.settings)
+    try:
+        known_driver(url)
+        check_settings(url, settings)
+    except ValueError as exc:
+        return Status(422, {"detail": str(exc)})
+    for field, value in changes.items():
+        setattr(robot, field, value)
+    robot.save()
+    reconfigure_sync(robot.name)
+    return robot
 
 
 @robots_router.get("/{name}/sensors", response={200: dict, 503: Error})

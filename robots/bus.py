@@ -47,6 +47,11 @@ async def announce_robot(robot_name: str) -> None:
     await get_channel_layer().send(MANAGER_CHANNEL, {"type": "robot.added", "name": robot_name})
 
 
+async def reconfigure(robot_name: str) -> None:
+    """The robot's row changed: its agent reopens the robot with the new URL and settings."""
+    await send_to_agent(robot_name, "robot.reconfigure")
+
+
 # -- from sync code (views in the web server's worker threads) -------------------------------
 
 _server_loop: asyncio.AbstractEventLoop | None = None
@@ -73,3 +78,4 @@ def _blocking(coro_fn):
 tell_agent_sync = _blocking(send_to_agent)
 ask_agent_sync = _blocking(ask_agent)
 announce_robot_sync = _blocking(announce_robot)
+reconfigure_sync = _blocking(reconfigure)

@@ -1,6 +1,7 @@
 import threading
 
 from django.contrib import messages
+from django.contrib.admin.views.decorators import staff_member_required
 from django.contrib.auth.decorators import login_required
 from django.http import HttpRequest, HttpResponse
 from django.shortcuts import redirect, render
@@ -8,7 +9,9 @@ from django.views.decorators.http import require_POST
 
 from programs.access import get_program_for_user, programs_for_user, runs_for_user
 from programs.models import Run, RunRefused, start_run
-from robots.bus import AgentUnavailable, ask_agent_sync
+from robots.bus import AgentUnavailable, ask_agent_sync, reconfigure_sync
+from robots.driver_settings import current_values
+from robots.forms import RobotConfigForm
 from robots.models import get_robot_for_user, robots_for_user
 from robots.readings import sensor_rows, show_items
 
@@ -26,6 +29,7 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
     robot = get_robot_for_user(request.user, name)
     context = {
         "robot": robot,
+        "options": current_values(robot),
         "running": runs_for_user(request.user).filter(robot=robot, state__in=Run.ACTIVE),
         "programs": programs_for_user(request.user),
     }
@@ -38,6 +42,22 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
         context["rows"] = sensor_rows(state["sensors"], state["units"])
         context["shows"] = show_items(state["shows"])
     return render(request, "robots/detail.html", context)
+
+
+@staff_member_required
+def robot_settings(request: HttpRequest, name: str) -> HttpResponse:
+    """Staff edit the robot's URL and driver options; its agent reopens the robot with them."""
+    robot = get_robot_for_user(request.user, name)
+    form = RobotConfigForm(request.POST or None, instance=robot)
+    if request.method == "POST" and form.is_valid():
+        form.save()
+        reconfigure_sync(robot.name)
+        if form.driver_changed:
+            messages.info(request, "Another driver: its options start from their defaults.")
+            return redirect("robot-settings", robot.name)
+        messages.success(request, f"Settings saved; {robot.name} is reopened with them.")
+        return redirect("robot-detail", robot.name)
+    return render(request, "robots/settings.html", {"robot": robot, "form": form})
 
 
 @login_required

@@ -1,0 +1,133 @@
+"""A robot's driver options as a typed form, for the robot page and the admin.
+
+The fields come from the driver's own signature (rhal.options), so a new driver option shows
+up here without a change. A value is stored in ``Robot.settings`` only when it differs from
+what the robot's URL or the driver's default already say, and the whole set is checked by
+building the driver (nothing is opened) before it is saved.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+from urllib.parse import urlsplit
+
+from django import forms
+from django.conf import settings as django_settings
+
+import rhal
+from programs.isolation import IsolationUnavailable, Policy
+from programs.launcher import Limits
+from rhal.options import Option, driver_options, url_options
+from robots.models import RUN_SETTINGS, Robot
+
+
+def known_driver(url: str) -> str:
+    """``url`` if a driver is registered for its scheme, else ValueError naming the known."""
+    scheme = urlsplit(url).scheme.lower()
+    if scheme not in rhal.DRIVERS:
+        known = ", ".join(f"{name}://" for name in sorted(rhal.DRIVERS))
+        raise ValueError(f"no robot driver for {url!r}; known: {known}")
+    return url
+
+
+def check_settings(url: str, settings: dict) -> None:
+    """ValueError if an agent could not use these settings: refused now, not found out later."""
+    robot = Robot(url=url, settings=settings)
+    try:
+        Limits.from_settings(settings.get("limits", {}))
+        Policy.from_settings(robot.run_isolation(django_settings.RUN_ISOLATION))
+        rhal.connect(url, **robot.driver_options())  # builds the driver, opens nothing
+    except (TypeError, ValueError, AttributeError, rhal.RhalError, IsolationUnavailable) as exc:
+        raise ValueError(f"settings: {exc}") from None
+
+
+def options_for(robot: Robot) -> list[Option]:
+    """The driver's options, or none when the URL names no driver that loads here."""
+    try:
+        return driver_options(robot.url)
+    except rhal.RhalError:
+        return []
+
+
+def current_values(robot: Robot) -> list[dict[str, Any]]:
+    """Each option with its value in force and where that comes from, for the robot page."""
+    query = url_options(robot.url)
+    rows = []
+    for option in options_for(robot):
+        if option.name in robot.settings:
+            value, source = robot.settings[option.name], "set here"
+        elif option.name in query:
+            value, source = query[option.name], "from the URL"
+        else:
+            value, source = option.default, "default"
+        rows.append({"option": option, "value": value, "source": source})
+    return rows
+
+
+def option_field(option: Option, initial: Any) -> forms.Field:
+    default = "none" if option.default is None else option.default
+    common = {
+        "required": False,
+        "initial": initial,
+        "help_text": f"{option.help} (default: {default})".lstrip(),
+    }
+    if option.kind is bool:
+        return forms.BooleanField(**common)
+    if option.kind is int:
+        return forms.IntegerField(**common)
+    if option.kind is float:
+        return forms.FloatField(**common)
+    if option.choices:
+        choices = [(choice, choice) for choice in option.choices]
+        return forms.ChoiceField(choices=choices, **common)
+    return forms.CharField(max_length=500, **common)
+
+
+def add_option_fields(form: forms.BaseForm, robot: Robot) -> None:
+    """Add a field per driver option to ``form``, named ``option_<name>``."""
+    for row in current_values(robot):
+        option = row["option"]
+        form.fields[f"option_{option.name}"] = option_field(option, row["value"])
+
+
+def settings_from(form: forms.BaseForm, robot: Robot, url: str | None = None) -> dict:
+    """The robot's new ``settings`` from a valid form; errors are added to the form.
+
+    Run settings (limits, isolation) are kept as they are; driver options are replaced.
+    """
+    url = url or robot.url
+    query = url_options(url)
+    chosen = {}
+    for option in options_for(Robot(url=url)):
+        key = f"option_{option.name}"
+        if key not in form.cleaned_data:
+            continue
+        value = _typed(option, form.cleaned_data[key])
+        baseline = query.get(option.name, option.default)
+        if value is not None and value != baseline:
+            chosen[option.name] = value
+    try:
+        rhal.connect(url, **chosen)  # builds the driver, opens nothing
+    except (TypeError, ValueError, rhal.RhalError) as exc:
+        _add_error(form, exc, chosen)
+        return robot.settings
+    kept = {k: v for k, v in robot.settings.items() if k in RUN_SETTINGS}
+    return {**kept, **chosen}
+
+
+def _typed(option: Option, value: Any) -> Any:
+    if option.kind is str and isinstance(value, str):
+        return option.parse(value)
+    if option.kind is float and value is not None and float(value).is_integer():
+        # 40.0 and the default 40 are the same setting: store what the signature says.
+        return int(value) if isinstance(option.default, int) else float(value)
+    return value
+
+
+def _add_error(form: forms.BaseForm, exc: Exception, chosen: dict) -> None:
+    message = str(exc)
+    for name in chosen:
+        if message.startswith(name) and f"option_{name}" in form.fields:
+            form.add_error(f"option_{name}", message)
+            return
+    form.add_error(None, message)

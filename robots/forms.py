@@ -1,0 +1,56 @@
+from urllib.parse import urlsplit
+
+from django import forms
+
+from robots.driver_settings import add_option_fields, check_settings, known_driver, settings_from
+from robots.models import RUN_SETTINGS, Robot
+
+
+class RobotConfigForm(forms.ModelForm):
+    """A robot's URL, description and driver options, one typed field per option.
+
+    The option fields are those of the driver the robot has now; when the URL names another
+    driver, its options are cleared and the form comes back with the new driver's fields.
+    """
+
+    class Meta:
+        model = Robot
+        fields = ["url", "description"]
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.driver_changed = False
+        if self.instance.url:
+            add_option_fields(self, self.instance)
+
+    def clean_url(self):
+        try:
+            return known_driver(self.cleaned_data["url"].strip())
+        except ValueError as exc:
+            raise forms.ValidationError(str(exc)) from None
+
+    def clean(self):
+        cleaned = super().clean()
+        url = cleaned.get("url")
+        if not url or self.errors:
+            return cleaned
+        base = Robot(url=url, settings=self._run_settings())
+        if _scheme(url) != _scheme(self.instance.url or ""):
+            self.driver_changed = True
+            settings = base.settings  # the new driver starts from its defaults
+        else:
+            settings = settings_from(self, base, url)
+        if not self.errors:
+            try:
+                check_settings(url, settings)
+            except ValueError as exc:
+                self.add_error(None, str(exc))
+        self.instance.settings = settings
+        return cleaned
+
+    def _run_settings(self) -> dict:
+        return {k: v for k, v in self.instance.settings.items() if k in RUN_SETTINGS}
+
+
+def _scheme(url: str) -> str:
+    return urlsplit(url).scheme.lower()
