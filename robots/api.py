@@ -76,7 +76,7 @@ def get_robot(request, name: str):
     return get_robot_for_user(request.user, name)
 
 
-@robots_router.patch("/{name}", response={200: RobotOut, 422: Error})
+@robots_router.patch("/{name}", response=RobotOut)
 def update_robot(request, name: str, data: RobotPatch):
     """Change a robot's URL, settings or description; its agent reopens the robot with them."""
     if not request.user.is_staff:
@@ -87,8 +87,8 @@ def update_robot(request, name: str, data: RobotPatch):
     try:
         known_driver(url)
         check_settings(url, settings)
-    except ValueError as exc:
-        return Status(422, {"detail": str(exc)})
+    except ValueError as exc:  # as ninja's own validation errors: 422
+        raise HttpError(422, str(exc)) from None
     for field, value in changes.items():
         setattr(robot, field, value)
     robot.save()
