@@ -4,12 +4,14 @@ robotide up [--bind HOST:PORT]   migrate, set up, serve (web + agents in one pro
                                  REDIS_URL is set: then the web tier only)
 robotide agent NAME              run one robot's agent (fleet mode)
 robotide token USERNAME          print a new API token for a user
+robotide robots detect [--json]  list serial ports and USB devices that look like robots
 robotide manage ...              Django's manage.py commands
 """
 
 import argparse
 import asyncio
 import contextlib
+import json
 import os
 import secrets
 import signal
@@ -37,8 +39,16 @@ def main(argv: list[str] | None = None) -> int:
     token = commands.add_parser("token", help="print a new API token for a user")
     token.add_argument("username")
     token.add_argument("--name", default="command line")
+    robots = commands.add_parser("robots", help="robot hardware on this computer")
+    robot_commands = robots.add_subparsers(dest="robots_command", required=True)
+    detect = robot_commands.add_parser("detect", help="list devices that look like robots")
+    detect.add_argument("--json", action="store_true", help="print JSON lines")
     commands.add_parser("manage", help="Django management commands", add_help=False)
     args, rest = parser.parse_known_args(argv)
+    if args.command == "robots":
+        if rest:
+            parser.error(f"unrecognized arguments: {' '.join(rest)}")
+        return cmd_detect(args)
     if args.command != "manage" and rest:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
     # What the server writes is its own; run accounts get only what is opened to them.
@@ -47,6 +57,22 @@ def main(argv: list[str] | None = None) -> int:
     return {"up": cmd_up, "agent": cmd_agent, "token": cmd_token, "manage": cmd_manage}[
         args.command
     ](args, rest)
+
+
+def cmd_detect(args) -> int:
+    """No Django and no umask change: it only reads what the kernel says."""
+    from rhal.detect import detect
+
+    findings = detect()
+    for finding in findings:
+        if args.json:
+            print(json.dumps(finding.as_dict()))
+        else:
+            guess = "" if finding.sure else "  (a guess: check it)"
+            print(f"{finding.device}\t{finding.looks_like}\n    {finding.url}{guess}")
+    if not findings and not args.json:
+        print("No device here looks like a robot this version drives.", file=sys.stderr)
+    return 0
 
 
 def cmd_up(args, rest) -> int:
