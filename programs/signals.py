@@ -12,6 +12,7 @@ EXAMPLES = {
     "square.py": "Drive a square",
     "wall.py": "Stop before the wall",
     "hello.sh": "Hello from the shell",
+    "any_robot.py": "Any robot: forward, turn, stop",
     # The same program in every language: the Robot API is the same in each.
     **{
         f"wall_turn{lang.extension}": f"Wall and turn ({lang.label})" for lang in LANGUAGES.values()

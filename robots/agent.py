@@ -51,6 +51,9 @@ HEARTBEAT_INTERVAL = 5.0
 SHOWS_SNAPSHOT_EVERY = 4  # telemetry ticks
 RETRY_DELAY = 1.0
 LINK_RETRY_MAX = 30.0  # seconds between tries to open a robot that is away
+# A hand drive lasts this long unless the browser repeats it: a page that hangs, loses its
+# network or is closed without a goodbye cannot leave the robot driving.
+TELEOP_DEADMAN = 0.6
 
 
 @dataclass
@@ -69,7 +72,9 @@ class RobotAgent:
         self.runs: dict[int, ActiveRun] = {}
         self.tokens: dict[str, ActiveRun] = {}
         self.shows: dict[str, dict] = {}
-        self.motion_owner: int | None = None  # the run whose drive() the robot follows now
+        # Whose drive() the robot follows now: a run id, or a browser's channel name.
+        self.motion_owner: int | str | None = None
+        self._deadman: asyncio.Task | None = None
         self.cancelled: set[int] = set()  # stopped before their start was handled
         self._shows_snapshot_due = True
         self.layer = get_channel_layer()
@@ -242,6 +247,10 @@ class RobotAgent:
         elif kind == "robot.state":
             state = {"sensors": await self.driver.sensors(), "units": self.units}
             await self.reply(message, {**state, "shows": self.shows})
+        elif kind == "robot.teleop":
+            await self.teleop(message["owner"], message["linear"], message["angular"])
+        elif kind == "robot.release":
+            await self.release(message["owner"])
         elif kind == "robot.reconfigure":
             await self.reconfigure()
         elif kind == "robot.camera":
@@ -370,6 +379,31 @@ class RobotAgent:
         except rhal.RhalError:  # link down: the robot's own watchdog stops it
             log.exception("agent %s: emergency stop could not reach the robot", self.name)
         return stopped
+
+    # -- driving by hand ----------------------------------------------------------------------
+
+    async def teleop(self, owner: str, linear: float, angular: float) -> None:
+        """A browser drives: it takes the motion over until it stops, leaves or goes quiet."""
+        try:
+            await self.driver.drive(linear, angular)
+        except (rhal.RhalError, ValueError) as exc:
+            await self.layer.send(owner, {"type": "robot.teleop_error", "error": str(exc)})
+            return
+        self.motion_owner = owner
+        if self._deadman is not None:
+            self._deadman.cancel()
+        self._deadman = asyncio.create_task(self._stop_after(owner, TELEOP_DEADMAN))
+
+    async def release(self, owner: str) -> None:
+        """The browser stopped driving or left: the robot stops if it still follows it."""
+        if self.motion_owner == owner:
+            self.motion_owner = None
+            with contextlib.suppress(rhal.RhalError):
+                await self.driver.stop()
+
+    async def _stop_after(self, owner: str, seconds: float) -> None:
+        await asyncio.sleep(seconds)
+        await self.release(owner)
 
     # -- publishing -------------------------------------------------------------------------
 

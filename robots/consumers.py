@@ -1,5 +1,8 @@
 """A robot's live page: sensor readings, values shown by programs, its running programs."""
 
+import json
+import math
+
 from asgiref.sync import sync_to_async
 from channels.db import database_sync_to_async
 from channels.generic.websocket import AsyncWebsocketConsumer
@@ -8,8 +11,30 @@ from django.template.loader import render_to_string
 
 from programs.access import runs_for_user
 from programs.models import Run
+from robots.bus import send_to_agent
 from robots.models import get_robot_for_user, robot_group
 from robots.readings import sensor_rows, show_items
+
+
+def parse_teleop(text: str | None) -> tuple[float, float] | str | None:
+    """(linear, angular), "stop", or None for anything that is not a hand-driving command."""
+    try:
+        message = json.loads(text or "")
+    except ValueError:
+        return None
+    if not isinstance(message, dict):
+        return None
+    if message.get("stop") is True:
+        return "stop"
+    drive = message.get("drive")
+    if (
+        isinstance(drive, list)
+        and len(drive) == 2
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in drive)
+        and all(math.isfinite(v) for v in drive)
+    ):
+        return float(drive[0]), float(drive[1])
+    return None
 
 
 @database_sync_to_async
@@ -27,6 +52,7 @@ class RobotConsumer(AsyncWebsocketConsumer):
             await self.close(code=4404)
             return
         self.shows: dict[str, dict] = {}
+        self.drove = False
         self.group = robot_group(self.robot.name)
         await self.channel_layer.group_add(self.group, self.channel_name)
         await self.accept()
@@ -36,6 +62,27 @@ class RobotConsumer(AsyncWebsocketConsumer):
     async def disconnect(self, code):
         if getattr(self, "group", None):
             await self.channel_layer.group_discard(self.group, self.channel_name)
+            if self.drove:  # a browser that leaves never leaves its robot driving
+                await send_to_agent(self.robot.name, "robot.release", owner=self.channel_name)
+
+    async def receive(self, text_data=None, bytes_data=None):
+        """Driving by hand: ``{"drive": [linear, angular]}`` repeated while held, or
+        ``{"stop": true}``. Anything else is ignored: the page also sends htmx's own frames."""
+        command = parse_teleop(text_data)
+        if command is None:
+            return
+        if command == "stop":
+            await send_to_agent(self.robot.name, "robot.release", owner=self.channel_name)
+            return
+        self.drove = True
+        linear, angular = command
+        await send_to_agent(
+            self.robot.name, "robot.teleop", owner=self.channel_name, linear=linear, angular=angular
+        )
+
+    async def robot_teleop_error(self, event):
+        html = render_to_string("robots/_teleop_status.html", {"error": event["error"]})
+        await self.send(html)
 
     async def robot_telemetry(self, event):
         shows_changed = bool(event["shows"] or event.get("all_shows"))

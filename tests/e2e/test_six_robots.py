@@ -1,0 +1,193 @@
+"""The paper's claim: one program, every robot; only the driver behind the Robot API changes.
+
+A real agent (in this process, on the in-memory channel layer) serves each robot; its peer
+sits on the other side of the driver's wire and decodes what it is told. The same program
+runs on each, and the robot's own stop is seen on the wire when a program ends, when a
+browser that drove it leaves, and on an emergency stop.
+"""
+
+import asyncio
+import contextlib
+import time
+
+import pytest
+from channels.db import database_sync_to_async
+from channels.testing import WebsocketCommunicator
+from django.contrib.auth.models import User
+
+from programs.models import Program, Run, start_run
+from robots.agent import RobotAgent
+from robots.bus import ask_agent
+from robots.consumers import RobotConsumer
+from robots.models import Robot
+from tests.peers import KINDS, WIRED, start_peer
+
+pytestmark = pytest.mark.django_db(transaction=True)
+
+EXAMPLE = "programs/examples/any_robot.py"
+
+
+async def until(predicate, timeout=10.0, what="condition"):
+    deadline = time.monotonic() + timeout
+    while not (result := predicate()):
+        assert time.monotonic() < deadline, f"{what} not met within {timeout} s"
+        await asyncio.sleep(0.05)
+    return result
+
+
+@pytest.fixture
+async def robot_on(tmp_path):
+    """``await robot_on(kind)`` -> (peer, agent, robot row, user), all torn down after."""
+    started = []
+
+    async def start(kind):
+        peer = await start_peer(kind, tmp_path)
+        robot = await database_sync_to_async(Robot.objects.create)(name=kind, url=peer.url)
+        agent = RobotAgent(kind)
+        task = asyncio.create_task(agent.serve())
+        started.append((peer, task))
+        await asyncio.wait_for(agent.ready.wait(), 15)
+        await until(lambda: agent.driver.is_open, what=f"{kind} robot open")
+        user = await database_sync_to_async(User.objects.create_user)(f"student-{kind}")
+        return peer, agent, robot, user
+
+    yield start
+    for peer, task in started:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+        await peer.stop()
+
+
+@database_sync_to_async
+def run_program(user, robot, source: str, language="python") -> Run:
+    program = Program.objects.create(owner=user, name=f"p{time.monotonic_ns()}", language=language)
+    program.save_source(source, user)
+    return start_run(program, robot, user)
+
+
+async def finished(run: Run, timeout=30.0) -> Run:
+    deadline = time.monotonic() + timeout
+    while True:
+        await database_sync_to_async(run.refresh_from_db)()
+        if run.state not in Run.ACTIVE:
+            return run
+        assert time.monotonic() < deadline, f"run {run.pk} still {run.state}"
+        await asyncio.sleep(0.1)
+
+
+def output_of(run: Run) -> str:
+    lines = run.log_path.read_text().splitlines()
+    return "\n".join(line[2:] for line in lines if line.startswith("o "))
+
+
+@pytest.mark.parametrize("kind", KINDS)
+async def test_the_same_program_runs_on_every_robot(kind, robot_on):
+    peer, agent, robot, user = await robot_on(kind)
+    with open(EXAMPLE) as source:
+        run = await finished(await run_program(user, robot, source.read()))
+    out = output_of(run)
+    assert run.state == "finished", f"{run.state}: {run.reason}\n{run.log_path.read_text()}"
+    assert f"stopped on a {agent.driver.kind} robot" in out
+    has = agent.driver.capabilities()["sensors"]
+    for name in ("heading", "range"):
+        if name in has:
+            assert f"{name}: " in out and "no such sensor" not in out.split(f"{name}: ")[1][:30]
+        else:
+            assert f"{name}: this robot has no such sensor" in out
+    if kind != "sim":  # a wire may still be carrying the stop (tones play in real time)
+        await until(lambda: peer.stops >= 1, what="the robot's stop on the wire")
+        assert peer.commanded() == (0.0, 0.0)
+
+
+@pytest.mark.parametrize("kind", WIRED)
+async def test_a_program_that_ends_while_driving_stops_the_robot(kind, robot_on):
+    peer, agent, robot, user = await robot_on(kind)
+    source = "import robot, time\nrobot.Robot().drive(0.3, 0.0)\ntime.sleep(1.0)\n"
+    run = await run_program(user, robot, source)
+    await until(lambda: peer.commanded()[0] > 0, what="driving forward on the wire")
+    stops = peer.stops
+    run = await finished(run)
+    assert run.state == "finished", run.reason
+    await until(lambda: peer.stops > stops, what="the robot's stop on the wire")
+    assert peer.commanded() == (0.0, 0.0)
+
+
+def robot_page(kind, user) -> WebsocketCommunicator:
+    page = WebsocketCommunicator(RobotConsumer.as_asgi(), f"/ws/robots/{kind}/")
+    page.scope["user"] = user
+    page.scope["url_route"] = {"kwargs": {"name": kind}}
+    return page
+
+
+@pytest.mark.parametrize("kind", WIRED)
+async def test_a_browser_that_leaves_stops_the_robot_it_drove(kind, robot_on, monkeypatch):
+    monkeypatch.setattr("robots.agent.TELEOP_DEADMAN", 600)  # so only the leaving stops it
+    peer, agent, robot, user = await robot_on(kind)
+    page = robot_page(kind, user)
+    assert (await page.connect())[0]
+    await page.send_to('{"drive": [0.0, 1.0]}')
+    await until(lambda: peer.commanded()[1] > 0, what="turning left on the wire")
+    stops = peer.stops
+    await page.disconnect()
+    await until(lambda: peer.stops > stops, what="the robot's stop on the wire")
+    assert peer.commanded() == (0.0, 0.0)
+
+
+@pytest.mark.parametrize("kind", WIRED)
+async def test_an_emergency_stop_stops_the_robot_and_its_programs(kind, robot_on):
+    peer, agent, robot, user = await robot_on(kind)
+    source = "import robot, time\nrobot.Robot().drive(0.3, 0.0)\ntime.sleep(60)\n"
+    run = await run_program(user, robot, source)
+    await until(lambda: peer.commanded()[0] > 0, what="driving forward on the wire")
+    stops = peer.stops
+    reply = await ask_agent(kind, "robot.estop")
+    assert reply["stopped"] == 1
+    await until(lambda: peer.stops > stops, what="the robot's stop on the wire")
+    assert peer.commanded() == (0.0, 0.0)
+    assert (await finished(run)).state == "stopped"
+    # Stopped again when already stopped: an e-stop is never skipped.
+    stops = peer.stops
+    await ask_agent(kind, "robot.estop")
+    await until(lambda: peer.stops > stops, what="a second stop on the wire")
+
+
+async def test_a_browser_that_goes_quiet_stops_the_robot(robot_on):
+    peer, agent, robot, user = await robot_on("pioneer")
+    page = robot_page("pioneer", user)
+    assert (await page.connect())[0]
+    await page.send_to('{"drive": [0.2, 0.0]}')
+    await until(lambda: peer.commanded()[0] > 0, what="driving forward on the wire")
+    # No more commands and no goodbye (a frozen tab, a lost network): the dead-man stops it.
+    await until(lambda: peer.commanded() == (0.0, 0.0), what="the dead-man's stop")
+    await page.disconnect()
+
+
+async def test_a_program_driving_is_not_stopped_by_a_browser_leaving(robot_on):
+    peer, agent, robot, user = await robot_on("pioneer")
+    page = robot_page("pioneer", user)
+    assert (await page.connect())[0]
+    await page.send_to('{"drive": [0.2, 0.0]}')
+    await until(lambda: peer.commanded()[0] > 0, what="driving forward on the wire")
+    source = "import robot, time\nrobot.Robot().drive(0.1, 0.0)\ntime.sleep(60)\n"
+    run = await run_program(user, robot, source)
+    await until(lambda: peer.commanded()[0] == pytest.approx(0.1), what="the program's speed")
+    await page.disconnect()  # the browser no longer owns the motion: nothing to stop
+    await asyncio.sleep(0.8)  # past the dead-man too
+    assert peer.commanded()[0] == pytest.approx(0.1)
+    await ask_agent("pioneer", "robot.estop")
+    await finished(run)
+
+
+async def test_hand_driving_commands_that_are_not_numbers_are_ignored(robot_on):
+    peer, agent, robot, user = await robot_on("pioneer")
+    page = robot_page("pioneer", user)
+    assert (await page.connect())[0]
+    for junk in ('{"drive": [1e999, 0]}', '{"drive": ["fast", 0]}', '{"drive": [true, 0]}',
+                 '{"drive": [1]}', "[1, 2]", "not json", '{"HEADERS": {}}'):  # fmt: skip
+        await page.send_to(junk)
+    await page.send_to('{"drive": [0.1, 0.0]}')
+    await until(lambda: peer.commanded()[0] > 0, what="the one good command")
+    vels = [c.arg for c in peer.emulator.named("VEL")]
+    assert all(v in (0, 100) for v in vels), vels
+    await page.disconnect()

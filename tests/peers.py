@@ -1,0 +1,135 @@
+"""One peer per driver, each on the far side of the driver's wire, behind one small interface,
+so a test can run the same program or the same stop on every kind of robot.
+
+    peer = await start_peer("pioneer", tmp_path)
+    peer.url          the robot URL that reaches this peer
+    peer.commanded()  (linear m/s, angular rad/s) last decoded off the wire; (0, 0) stopped
+    peer.stops        stop commands the peer has decoded so far
+    await peer.stop()
+
+Each peer decodes with its own code or a real library (a Goertzel detector, the ARCOS
+emulator, nxt-python's wire format, pymavlink, canopen), never with the driver's classes.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from pathlib import Path
+from typing import Any
+
+from tests.rhal.dtmf_decoder import decode, read_wav
+
+#: Every driver kind, as the "one program, six robots" tests run them.
+KINDS = ("sim", "dtmf", "nxt", "pioneer", "mavlink", "can")
+#: Kinds with a wire, whose stop a peer can see.
+WIRED = KINDS[1:]
+
+
+async def start_peer(kind: str, tmp_path: Path) -> Any:
+    peer = _PEERS[kind](tmp_path)
+    await peer.start()
+    return peer
+
+
+class SimPeer:
+    """The simulator has no wire: its "peer" is the driver's own state, read by the test."""
+
+    def __init__(self, tmp_path: Path) -> None:
+        self.url = "sim://"
+        self.stops = 0
+
+    async def start(self) -> None:
+        pass
+
+    async def stop(self) -> None:
+        pass
+
+
+class DtmfPeer:
+    """Decodes the tones the driver wrote to its WAV file, as the MT8870 on the robot would."""
+
+    # Digits of the default table, as the robot's H-bridges turn them into wheel directions.
+    MOTION = {
+        "D": (0.0, 0.0), "5": (1.0, 0.0), "0": (-1.0, 0.0), "6": (0.0, 1.0),
+        "9": (0.0, -1.0), "4": (0.5, 0.5), "1": (0.5, -0.5),
+    }  # fmt: skip
+    STOP_REPEATS = 3
+
+    def __init__(self, tmp_path: Path) -> None:
+        self.path = tmp_path / "tones.wav"
+        self.url = f"dtmf://?wav={self.path}"
+
+    async def start(self) -> None:
+        pass
+
+    async def stop(self) -> None:
+        pass
+
+    def digits(self) -> list[str]:
+        if not self.path.exists() or self.path.stat().st_size <= 44:
+            return []
+        samples, rate = read_wav(self.path)
+        # The last burst may still be being written: only whole tones count.
+        return [digit for digit, tone_ms, _ in decode(samples, rate) if tone_ms >= 35]
+
+    def commanded(self) -> tuple[float, float]:
+        digits = self.digits()
+        return self.MOTION[digits[-1]] if digits else (0.0, 0.0)
+
+    @property
+    def stops(self) -> int:
+        return self.digits().count("D") // self.STOP_REPEATS
+
+
+class PioneerPeer:
+    """The ARCOS robot emulator on TCP, which checks every packet's checksum itself."""
+
+    def __init__(self, tmp_path: Path) -> None:
+        from tests.rhal.arcos_emulator import ArcosEmulator
+
+        self.emulator = ArcosEmulator()
+
+    async def start(self) -> None:
+        port = await self.emulator.start_tcp()
+        self.url = f"pioneer+tcp://127.0.0.1:{port}"
+
+    async def stop(self) -> None:
+        await self.emulator.stop()
+
+    def commanded(self) -> tuple[float, float]:
+        return self.emulator.vel / 1000.0, math.radians(self.emulator.rvel)
+
+    @property
+    def stops(self) -> int:
+        """VEL 0 then RVEL 0: the driver's stop (a turn on the spot also sends VEL 0)."""
+        motion = [(c.name, c.arg) for c in self.emulator.commands if c.name in ("VEL", "RVEL")]
+        return sum(1 for a, b in zip(motion, motion[1:]) if a == ("VEL", 0) and b == ("RVEL", 0))
+
+
+class _Emulator:
+    """A helper's emulator class that already speaks this interface."""
+
+    module: str
+    name: str
+
+    def __init__(self, tmp_path: Path) -> None:
+        cls = getattr(importlib.import_module(self.module), self.name)
+        self.emulator = cls()
+
+    async def start(self) -> None:
+        await self.emulator.start()
+        self.url = self.emulator.url
+
+    async def stop(self) -> None:
+        await self.emulator.stop()
+
+    def commanded(self) -> tuple[float, float]:
+        return self.emulator.commanded()
+
+    @property
+    def stops(self) -> int:
+        return self.emulator.stops
+
+
+_PEERS = {"sim": SimPeer, "dtmf": DtmfPeer, "pioneer": PioneerPeer}
