@@ -16,6 +16,7 @@ class RobotConfigForm(forms.ModelForm):
     class Meta:
         model = Robot
         fields = ["url", "description"]
+        labels = {"url": "URL"}
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)

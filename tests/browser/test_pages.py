@@ -412,3 +412,28 @@ def test_other_users_cannot_open_my_programs_or_runs(new_page, appliance):
     page.goto("/programs/")
     page.get_by_role("link", name="Compass").click()
     expect(page.locator(".CodeMirror")).to_be_visible()
+
+
+def test_staff_change_a_robots_options_and_it_reopens_with_them(page, appliance, screenshot):
+    page.goto("/robots/sim/")
+    page.get_by_role("link", name="edit").click()
+    expect(page.get_by_role("heading", name="Driver options")).to_be_visible()
+    page.get_by_label("max_linear").fill("-1")
+    page.get_by_role("button", name="Save and reopen").click()
+    expect(page.locator(".errorlist")).to_contain_text("max_linear must be greater than 0")
+    page.get_by_label("max_linear").fill("0.3")
+    page.get_by_label("arena").select_option("square")
+    screenshot(page, "robot-settings")
+    page.get_by_role("button", name="Save and reopen").click()
+    expect(page.locator(".messages")).to_contain_text("Settings saved")
+    options = page.locator("table.options")
+    expect(options.locator("tr", has_text="max_linear")).to_contain_text("0.3set here")
+    expect(options.locator("tr", has_text="arena")).to_contain_text("squareset here")
+    screenshot(page, "robot-with-settings")
+    assert appliance.api("GET", "/api/robots/sim").json()["settings"] == {
+        "arena": "square",
+        "max_linear": 0.3,
+    }
+    # Back as it was, for the other tests on this appliance.
+    response = appliance.api("PATCH", "/api/robots/sim", {"settings": {}})
+    assert response.status_code == 200

@@ -17,7 +17,7 @@ from django.contrib.auth.models import User
 
 from programs.models import Program, Run, start_run
 from robots.agent import RobotAgent
-from robots.bus import ask_agent
+from robots.bus import ask_agent, send_to_agent
 from robots.consumers import RobotConsumer
 from robots.models import Robot
 from tests.peers import KINDS, WIRED, start_peer
@@ -191,3 +191,16 @@ async def test_hand_driving_commands_that_are_not_numbers_are_ignored(robot_on):
     vels = [c.arg for c in peer.emulator.named("VEL")]
     assert all(v in (0, 100) for v in vels), vels
     await page.disconnect()
+
+
+async def test_new_settings_reopen_the_robot_with_them(robot_on):
+    peer, agent, robot, user = await robot_on("pioneer")
+    old = agent.driver
+    robot.settings = {"max_linear": 0.15}
+    await database_sync_to_async(robot.save)()
+    await send_to_agent("pioneer", "robot.reconfigure")
+    await until(lambda: agent.driver is not old and agent.driver.is_open, what="reopened")
+    assert not old.is_open
+    assert agent.driver.capabilities()["drive"]["max_linear"] == 0.15
+    await agent.driver.drive(1.0, 0.0)
+    await until(lambda: peer.commanded()[0] == pytest.approx(0.15), what="the new limit")
