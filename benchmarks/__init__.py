@@ -6,4 +6,11 @@ Each benchmark starts its own real appliance (``robotide up`` in a subprocess, s
 tests/appliance.py) on 127.0.0.1 and measures its baselines in the same run.
 """
 
-BENCHMARKS = ("idle_memory", "start_overhead", "api_roundtrips", "languages", "throughput")
+BENCHMARKS = (
+    "idle_memory",
+    "start_overhead",
+    "api_roundtrips",
+    "languages",
+    "throughput",
+    "drivers",
+)

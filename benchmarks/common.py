@@ -43,7 +43,7 @@ class Figure:
         if self.unit == "us":
             return f"{v:,.0f} µs"
         if self.unit == "ms":
-            return f"{v:.1f} ms"
+            return f"{v:.2f} ms" if v < 10 else f"{v:.1f} ms"
         if self.unit == "MB":
             return f"{v:.1f} MB"
         if self.unit == "x":
