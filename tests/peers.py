@@ -104,7 +104,8 @@ class PioneerPeer:
     def stops(self) -> int:
         """VEL 0 then RVEL 0: the driver's stop (a turn on the spot also sends VEL 0)."""
         motion = [(c.name, c.arg) for c in self.emulator.commands if c.name in ("VEL", "RVEL")]
-        return sum(1 for a, b in zip(motion, motion[1:]) if a == ("VEL", 0) and b == ("RVEL", 0))
+        pairs = zip(motion, motion[1:], strict=False)
+        return sum(1 for pair in pairs if pair == (("VEL", 0), ("RVEL", 0)))
 
 
 class _Emulator:
@@ -132,4 +133,10 @@ class _Emulator:
         return self.emulator.stops
 
 
-_PEERS = {"sim": SimPeer, "dtmf": DtmfPeer, "pioneer": PioneerPeer}
+class MavlinkPeer(_Emulator):
+    """An ArduPilot Rover emulator on TCP that enforces the mode and arming rules."""
+
+    module, name = "tests.rhal.mavlink_emulator", "MavlinkEmulator"
+
+
+_PEERS = {"sim": SimPeer, "dtmf": DtmfPeer, "pioneer": PioneerPeer, "mavlink": MavlinkPeer}
