@@ -58,6 +58,10 @@ class Peer:
             _, t, linear, angular = line.split()
             self.lines.put_nowait((float(t), float(linear), float(angular)))
 
+    def drain(self) -> None:
+        while not self.lines.empty():
+            self.lines.get_nowait()
+
     async def next_change(self, timeout: float = 5.0) -> tuple[float, float, float]:
         return await asyncio.wait_for(self.lines.get(), timeout)
 
@@ -75,14 +79,17 @@ async def latency(robot: rhal.Robot, peer: Peer, spacing: float) -> list[float]:
     await robot.drive(0.2, 0.0)  # warm-up: arming, mode changes, first packets
     await peer.next_change(timeout=30.0)
     await asyncio.sleep(0.5)
-    while not peer.lines.empty():
-        peer.lines.get_nowait()
     delays = []
     for i in range(CHANGES):
         speed = 0.1 if i % 2 else -0.1
+        peer.drain()
         sent = time.monotonic()
         await robot.drive(speed, 0.0)
-        t, _, _ = await peer.next_change()
+        # A command may reach the wire in parts (one motor, then the other): wait for all.
+        while True:
+            t, linear, angular = await peer.next_change()
+            if linear * speed > 0 and abs(angular) < 1e-6:
+                break
         delays.append((t - sent) * 1000.0)
         await asyncio.sleep(spacing)
     return delays

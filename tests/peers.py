@@ -139,4 +139,16 @@ class MavlinkPeer(_Emulator):
     module, name = "tests.rhal.mavlink_emulator", "MavlinkEmulator"
 
 
-_PEERS = {"sim": SimPeer, "dtmf": DtmfPeer, "pioneer": PioneerPeer, "mavlink": MavlinkPeer}
+class NxtPeer(_Emulator):
+    """A Lego NXT brick on a pty, decoding the Direct Commands nxt-python sends it."""
+
+    module, name = "tests.rhal.nxt_emulator", "NxtEmulator"
+
+
+_PEERS = {
+    "sim": SimPeer,
+    "dtmf": DtmfPeer,
+    "nxt": NxtPeer,
+    "pioneer": PioneerPeer,
+    "mavlink": MavlinkPeer,
+}
