@@ -19,7 +19,7 @@ DEFAULT_POLL = 0.0002
 
 
 async def serve(kind: str, folder: Path) -> None:
-    peer = await start_peer(kind, folder)
+    peer = await start_peer(kind, folder, other_process=True)
     print("url", peer.url, flush=True)
     loop = asyncio.get_running_loop()
     closed = loop.run_in_executor(None, sys.stdin.read)  # EOF: the benchmark is done

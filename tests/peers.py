@@ -26,8 +26,10 @@ KINDS = ("sim", "dtmf", "nxt", "pioneer", "mavlink", "can")
 WIRED = KINDS[1:]
 
 
-async def start_peer(kind: str, tmp_path: Path) -> Any:
-    peer = _PEERS[kind](tmp_path)
+async def start_peer(kind: str, tmp_path: Path, *, other_process: bool = False) -> Any:
+    """``other_process``: the driver is in another process (a benchmark), so the peer must be
+    reachable from there (CAN on an interface-local UDP multicast group, not in-process)."""
+    peer = _PEERS[kind](tmp_path, other_process=other_process)
     await peer.start()
     return peer
 
@@ -35,7 +37,7 @@ async def start_peer(kind: str, tmp_path: Path) -> Any:
 class SimPeer:
     """The simulator has no wire: its "peer" is the driver's own state, read by the test."""
 
-    def __init__(self, tmp_path: Path) -> None:
+    def __init__(self, tmp_path: Path, **_: Any) -> None:
         self.url = "sim://"
         self.stops = 0
 
@@ -56,7 +58,7 @@ class DtmfPeer:
     }  # fmt: skip
     STOP_REPEATS = 3
 
-    def __init__(self, tmp_path: Path) -> None:
+    def __init__(self, tmp_path: Path, **_: Any) -> None:
         self.path = tmp_path / "tones.wav"
         self.url = f"dtmf://?wav={self.path}"
 
@@ -85,7 +87,7 @@ class DtmfPeer:
 class PioneerPeer:
     """The ARCOS robot emulator on TCP, which checks every packet's checksum itself."""
 
-    def __init__(self, tmp_path: Path) -> None:
+    def __init__(self, tmp_path: Path, **_: Any) -> None:
         from tests.rhal.arcos_emulator import ArcosEmulator
 
         self.emulator = ArcosEmulator()
@@ -114,9 +116,11 @@ class _Emulator:
     module: str
     name: str
 
-    def __init__(self, tmp_path: Path) -> None:
+    def __init__(self, tmp_path: Path, other_process: bool = False) -> None:
         cls = getattr(importlib.import_module(self.module), self.name)
-        self.emulator = cls()
+        self.emulator = cls(**(self.across_processes if other_process else {}))
+
+    across_processes: dict[str, Any] = {}
 
     async def start(self) -> None:
         await self.emulator.start()
@@ -145,10 +149,18 @@ class NxtPeer(_Emulator):
     module, name = "tests.rhal.nxt_emulator", "NxtEmulator"
 
 
+class CanPeer(_Emulator):
+    """Two CiA 402 drives (canopen LocalNodes) on python-can's in-process virtual bus."""
+
+    module, name = "tests.rhal.can_emulator", "Cia402BaseEmulator"
+    across_processes = {"interface": "udp_multicast"}  # an interface-local IPv6 group
+
+
 _PEERS = {
     "sim": SimPeer,
     "dtmf": DtmfPeer,
     "nxt": NxtPeer,
     "pioneer": PioneerPeer,
     "mavlink": MavlinkPeer,
+    "can": CanPeer,
 }
