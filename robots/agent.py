@@ -245,7 +245,8 @@ class RobotAgent:
         elif kind == "robot.sensors":
             await self.reply(message, {"sensors": await self.driver.sensors()})
         elif kind == "robot.state":
-            state = {"sensors": await self.driver.sensors(), "units": self.units}
+            camera = self.driver.capabilities().get("camera") is not None
+            state = {"sensors": await self.readings(), "units": self.units, "camera": camera}
             await self.reply(message, {**state, "shows": self.shows})
         elif kind == "robot.teleop":
             await self.teleop(message["owner"], message["linear"], message["angular"])
@@ -430,15 +431,21 @@ class RobotAgent:
             except Exception:
                 log.exception("agent %s: could not publish to %s", self.name, group)
 
+    async def readings(self) -> dict:
+        """The robot's readings, or ``{"error": why}`` while it cannot be reached."""
+        try:
+            return await self.driver.sensors()
+        except rhal.RhalError as exc:
+            if not self.driver.is_open and self.link_error:
+                return {"error": f"not connected ({self.link_error})"}
+            return {"error": str(exc)}
+
     async def _telemetry_loop(self) -> None:
         """Latest-state snapshots, throttled at the source; all shown values once a second."""
         last_heartbeat = 0.0
         loop = asyncio.get_running_loop()
         for tick in itertools.count():
-            try:
-                sensors = await self.driver.sensors()
-            except rhal.RhalError as exc:
-                sensors = {"error": str(exc)}
+            sensors = await self.readings()
             changed, self.api.changed_shows = self.api.changed_shows, {}
             full = self._shows_snapshot_due or tick % SHOWS_SNAPSHOT_EVERY == 0
             self._shows_snapshot_due = False

@@ -13,7 +13,7 @@ from programs.access import runs_for_user
 from programs.models import Run
 from robots.bus import send_to_agent
 from robots.models import get_robot_for_user, robot_group
-from robots.readings import sensor_rows, show_items
+from robots.readings import link_error, sensor_rows, show_items
 
 
 def parse_teleop(text: str | None) -> tuple[float, float] | str | None:
@@ -94,8 +94,10 @@ class RobotConsumer(AsyncWebsocketConsumer):
         await self.send(html)
 
     def _render(self, event: dict, shows_changed: bool) -> str:
-        rows = sensor_rows(event["sensors"], event.get("units", {}))
-        html = render_to_string("robots/_sensors.html", {"rows": rows, "oob": True})
+        sensors = event["sensors"]
+        rows = sensor_rows(sensors, event.get("units", {}))
+        context = {"rows": rows, "link_error": link_error(sensors), "oob": True}
+        html = render_to_string("robots/_sensors.html", context)
         if shows_changed:
             context = {"shows": show_items(self.shows), "oob": True}
             html += render_to_string("robots/_shows.html", context)

@@ -23,7 +23,14 @@ def show_item(name: str, entry: dict) -> dict:
 
 
 def sensor_rows(sensors: dict, units: dict) -> list[tuple[str, object, str]]:
-    return [(name, value, units.get(name, "")) for name, value in flatten(sensors)]
+    """Name, value and unit of each reading; a link error is not a reading (see link_error)."""
+    readings = {k: v for k, v in sensors.items() if k != "error"}
+    return [(name, value, units.get(name, "")) for name, value in flatten(readings)]
+
+
+def link_error(sensors: dict) -> str | None:
+    """Why the agent got no readings (the robot unplugged, reconnecting), if it did not."""
+    return sensors.get("error") if isinstance(sensors.get("error"), str) else None
 
 
 def show_items(shows: dict) -> list[dict]:

@@ -24,6 +24,8 @@ from tests.rhal.dtmf_decoder import decode, read_wav
 KINDS = ("sim", "dtmf", "nxt", "pioneer", "mavlink", "can")
 #: Kinds with a wire, whose stop a peer can see.
 WIRED = KINDS[1:]
+#: Kinds with a link that can be unplugged and plugged back (a sound card's cable can't tell).
+LINKED = ("nxt", "pioneer", "mavlink", "can")
 
 
 async def start_peer(kind: str, tmp_path: Path, *, other_process: bool = False) -> Any:
@@ -93,11 +95,17 @@ class PioneerPeer:
         self.emulator = ArcosEmulator()
 
     async def start(self) -> None:
-        port = await self.emulator.start_tcp()
-        self.url = f"pioneer+tcp://127.0.0.1:{port}"
+        self.port = await self.emulator.start_tcp()
+        self.url = f"pioneer+tcp://127.0.0.1:{self.port}"
 
     async def stop(self) -> None:
         await self.emulator.stop()
+
+    async def unplug(self) -> None:
+        await self.emulator.stop()
+
+    async def replug(self) -> None:
+        await self.emulator.start_tcp(self.port)
 
     def commanded(self) -> tuple[float, float]:
         return self.emulator.vel / 1000.0, math.radians(self.emulator.rvel)
@@ -131,6 +139,12 @@ class _Emulator:
 
     def commanded(self) -> tuple[float, float]:
         return self.emulator.commanded()
+
+    async def unplug(self) -> None:
+        await self.emulator.unplug()
+
+    async def replug(self) -> None:
+        await self.emulator.replug()
 
     @property
     def stops(self) -> int:

@@ -8,7 +8,7 @@ import re
 import pytest
 from playwright.sync_api import Page, expect
 
-from tests.appliance import ADMIN_PASSWORD
+from tests.appliance import ADMIN_PASSWORD, free_port
 
 EXAMPLES = ["Compass", "Drive a square", "Stop before the wall", "Hello from the shell"]
 
@@ -437,3 +437,17 @@ def test_staff_change_a_robots_options_and_it_reopens_with_them(page, appliance,
     # Back as it was, for the other tests on this appliance.
     response = appliance.api("PATCH", "/api/robots/sim", {"settings": {}})
     assert response.status_code == 200
+
+
+def test_a_robot_that_is_away_says_why_on_its_page(page, appliance, screenshot):
+    port = free_port()  # nothing listens there: a Pioneer that is switched off
+    response = appliance.api(
+        "POST", "/api/robots",
+        {"name": "away", "url": f"pioneer+tcp://127.0.0.1:{port}", "settings": {"timeout": 0.5}},
+    )  # fmt: skip
+    assert response.status_code == 201, response.text
+    page.goto("/robots/away/")
+    alert = page.locator("#sensors").get_by_role("alert")
+    expect(alert).to_contain_text("Robot not reachable")
+    expect(alert).to_contain_text(f"127.0.0.1:{port}")
+    screenshot(page, "robot-away")

@@ -20,7 +20,7 @@ from robots.agent import RobotAgent
 from robots.bus import ask_agent, send_to_agent
 from robots.consumers import RobotConsumer
 from robots.models import Robot
-from tests.peers import KINDS, WIRED, start_peer
+from tests.peers import KINDS, LINKED, WIRED, start_peer
 
 pytestmark = pytest.mark.django_db(transaction=True)
 
@@ -204,3 +204,58 @@ async def test_new_settings_reopen_the_robot_with_them(robot_on):
     assert agent.driver.capabilities()["drive"]["max_linear"] == 0.15
     await agent.driver.drive(1.0, 0.0)
     await until(lambda: peer.commanded()[0] == pytest.approx(0.15), what="the new limit")
+
+
+PATIENT = """\
+import time
+import robot
+
+bot = robot.Robot()
+bot.sensors()
+print("ready", flush=True)
+lost = False
+for _ in range(1200):
+    try:
+        bot.sensors()
+    except robot.RobotError as exc:
+        if not lost:
+            print("error:", exc, flush=True)
+        lost = True
+    else:
+        if lost:
+            print("back", flush=True)
+            break
+    time.sleep(0.05)
+"""
+
+
+async def page_says(page, text: str, timeout: float = 15.0) -> str:
+    deadline = time.monotonic() + timeout
+    while True:
+        left = deadline - time.monotonic()
+        assert left > 0, f"the robot page never said {text!r}"
+        html = await page.receive_from(timeout=left)
+        if text in html:
+            return html
+
+
+@pytest.mark.parametrize("kind", LINKED)
+async def test_an_unplugged_robot_is_reported_and_comes_back(kind, robot_on):
+    peer, agent, robot, user = await robot_on(kind)
+    page = robot_page(kind, user)
+    assert (await page.connect())[0]
+    run = await run_program(user, robot, PATIENT)
+    await until(lambda: run.log_path.exists() and "o ready" in run.log_path.read_text(),
+                what="the program asking")  # fmt: skip
+    await peer.unplug()
+    html = await page_says(page, "Robot not reachable")
+    assert 'role="alert"' in html
+    await peer.replug()
+    await page_says(page, "<th>")  # readings again
+    run = await finished(run)
+    out = output_of(run)
+    assert run.state == "finished", run.reason
+    error = next(line for line in out.splitlines() if line.startswith("error:"))
+    assert kind in error and ("reconnect" in error or "lost" in error), error
+    assert out.endswith("back")
+    await page.disconnect()
