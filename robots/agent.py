@@ -53,7 +53,7 @@ RETRY_DELAY = 1.0
 LINK_RETRY_MAX = 30.0  # seconds between tries to open a robot that is away
 # A hand drive lasts this long unless the browser repeats it: a page that hangs, loses its
 # network or is closed without a goodbye cannot leave the robot driving.
-TELEOP_DEADMAN = 0.6
+TELEOP_DEADMAN = 0.4
 
 
 @dataclass

@@ -1,3 +1,4 @@
+import json
 import re
 
 from django.db import IntegrityError
@@ -81,6 +82,9 @@ def update_robot(request, name: str, data: RobotPatch):
     """Change a robot's URL, settings or description; its agent reopens the robot with them."""
     if not request.user.is_staff:
         raise HttpError(403, "Only staff may change robots.")
+    # Every field is optional, and ninja reads a body that is no object as one with none.
+    if not isinstance(json.loads(request.body or b"{}"), dict):
+        raise HttpError(422, "the body must be a JSON object")
     robot = get_robot_for_user(request.user, name)
     changes = data.dict(exclude_none=True)
     url, settings = changes.get("url", robot.url), changes.get("settings", robot.settings)
