@@ -14,6 +14,7 @@ import logging
 import secrets
 import shutil
 import tempfile
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -91,6 +92,8 @@ class RobotAgent:
         )
         self.ready = asyncio.Event()
         self._opening = asyncio.Lock()
+        # More message kinds -> coroutine(message), for parts that live in modules of their own.
+        self.handlers: dict[str, Callable[[dict], Awaitable[None]]] = {}
         self._outbox: asyncio.Queue = asyncio.Queue()
         self._tasks: list[asyncio.Task] = []
         self._starting: set[asyncio.Task] = set()
@@ -256,6 +259,8 @@ class RobotAgent:
             await self.reconfigure()
         elif kind == "robot.camera":
             await self.reply(message, {"jpeg": await self.driver.camera_jpeg()})
+        elif kind in self.handlers:
+            await self.handlers[kind](message)
         else:
             log.warning("agent %s: unknown message %r", self.name, kind)
 

@@ -2,7 +2,7 @@
 # What the tests need from the machine, from Debian's archive, installed only when missing:
 # Chromium (browser tests), util-linux (setpriv, prlimit), bubblewrap and nftables (the runs'
 # sandbox and network), the languages' interpreters, PostgreSQL and Redis (fleet mode), started
-# if they are not running.
+# if they are not running, espeak-ng and ffmpeg (speech and cameras for programs).
 set -eu
 need=""
 have() { command -v "$1" >/dev/null 2>&1 || [ -x "/usr/sbin/$1" ] || [ -x "/sbin/$1" ]; }
@@ -22,6 +22,9 @@ ls -d /usr/share/tcltk/tcllib* >/dev/null 2>&1 || need="$need tcllib"
 have node || need="$need nodejs"
 have redis-server || need="$need redis-server"
 have pg_ctlcluster || need="$need postgresql"
+# Host services for programs (say, the camera) and their tests.
+have espeak-ng || need="$need espeak-ng"
+have ffmpeg || need="$need ffmpeg"
 if [ -n "$need" ]; then
     if [ "$(id -u)" -ne 0 ]; then
         echo "missing system packages:$need (run as root, or install them)" >&2
