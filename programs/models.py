@@ -201,6 +201,7 @@ def start_run(program: Program, robot: Robot, user, args=()) -> Run:
         "source": run.source,
         "filename": program.filename,
         "args": [str(a) for a in args],
+        "user": user.get_username(),
     }
     transaction.on_commit(lambda: _hand_to_agent(run, message))
     return run

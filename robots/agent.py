@@ -42,6 +42,7 @@ from programs.supervisor import RunProcess
 from programs.watch import RunWatch, signal_account
 from robots import rpc
 from robots.bus import MANAGER_CHANNEL, RUNS_GROUP, run_group
+from robots.lease import ControlLease, Holder, LeaseHeld
 from robots.models import Robot, agent_channel, robot_group
 from robots.robot_api import RobotApi
 
@@ -63,6 +64,7 @@ class ActiveRun:
     token: str
     process: RunProcess
     watcher: asyncio.Task | None = field(default=None, repr=False)
+    user: str = ""  # who started it, as the control lease names it
 
 
 class RobotAgent:
@@ -76,6 +78,7 @@ class RobotAgent:
         # Whose drive() the robot follows now: a run id, or a browser's channel name.
         self.motion_owner: int | str | None = None
         self._deadman: asyncio.Task | None = None
+        self.lease = ControlLease()
         self.cancelled: set[int] = set()  # stopped before their start was handled
         self._shows_snapshot_due = True
         self.layer = get_channel_layer()
@@ -248,13 +251,21 @@ class RobotAgent:
         elif kind == "robot.sensors":
             await self.reply(message, {"sensors": await self.driver.sensors()})
         elif kind == "robot.state":
-            camera = self.driver.capabilities().get("camera") is not None
+            capabilities = self.driver.capabilities()
+            camera = capabilities.get("camera") is not None
             state = {"sensors": await self.readings(), "units": self.units, "camera": camera}
+            state["drive"] = capabilities["drive"]
+            state["lease"] = self.lease.holder.as_dict() if self.lease.holder else None
             await self.reply(message, {**state, "shows": self.shows})
         elif kind == "robot.teleop":
-            await self.teleop(message["owner"], message["linear"], message["angular"])
+            holder = Holder("teleop", message["owner"], message.get("user", "?"))
+            await self.teleop(holder, message["linear"], message["angular"])
+        elif kind == "robot.teleop_stop":
+            await self.stop_motion_of(message["owner"])
         elif kind == "robot.release":
             await self.release(message["owner"])
+        elif kind == "robot.take_control":
+            await self.take_control(Holder("teleop", message["owner"], message["user"]))
         elif kind == "robot.reconfigure":
             await self.reconfigure()
         elif kind == "robot.camera":
@@ -342,7 +353,7 @@ class RobotAgent:
             wrapped=self.isolation.sandbox,
         )
         # The token is good before the program starts: it may call auth at once.
-        active = ActiveRun(run_id, token, process)
+        active = ActiveRun(run_id, token, process, user=message.get("user", ""))
         self.runs[run_id] = active
         self.tokens[token] = active
         try:
@@ -359,10 +370,10 @@ class RobotAgent:
         # The token dies with the run, before anything else can use it.
         self.tokens.pop(active.token, None)
         self.runs.pop(active.run_id, None)
-        if self.motion_owner == active.run_id:  # its motion ends with it, however it ended
-            self.motion_owner = None
-            with contextlib.suppress(rhal.RhalError):
-                await self.driver.stop()
+        # Its motion ends with it, however it ended, and so does its control of the robot.
+        await self.stop_motion_of(active.run_id)
+        if self.lease.release(active.run_id):
+            self._lease_changed()
         shutil.rmtree(settings.RUNS_DIR / str(active.run_id) / "work", ignore_errors=True)
         await self._end_run(active.run_id, outcome.state, outcome.exit_code, outcome.reason)
 
@@ -380,19 +391,28 @@ class RobotAgent:
     async def estop(self) -> int:
         stopped = sum(self.stop_run(run_id, "emergency stop") for run_id in list(self.runs))
         self.motion_owner = None
+        if self.lease.clear():
+            self._lease_changed()
         try:
             await self.driver.stop()
         except rhal.RhalError:  # link down: the robot's own watchdog stops it
             log.exception("agent %s: emergency stop could not reach the robot", self.name)
         return stopped
 
-    # -- driving by hand ----------------------------------------------------------------------
+    # -- driving by hand, and who may drive ------------------------------------------------
 
-    async def teleop(self, owner: str, linear: float, angular: float) -> None:
-        """A browser drives: it takes the motion over until it stops, leaves or goes quiet."""
+    def take_lease(self, holder: Holder) -> None:
+        """Hold the control lease for ``holder``; LeaseHeld if someone else holds it."""
+        if self.lease.acquire(holder):
+            self._lease_changed()
+
+    async def teleop(self, holder: Holder, linear: float, angular: float) -> None:
+        """A browser drives: with the lease, until it stops, leaves or goes quiet."""
+        owner = holder.key
         try:
+            self.take_lease(holder)
             await self.driver.drive(linear, angular)
-        except (rhal.RhalError, ValueError) as exc:
+        except (LeaseHeld, rhal.RhalError, ValueError) as exc:
             await self.layer.send(owner, {"type": "robot.teleop_error", "error": str(exc)})
             return
         self.motion_owner = owner
@@ -400,16 +420,34 @@ class RobotAgent:
             self._deadman.cancel()
         self._deadman = asyncio.create_task(self._stop_after(owner, TELEOP_DEADMAN))
 
-    async def release(self, owner: str) -> None:
-        """The browser stopped driving or left: the robot stops if it still follows it."""
+    async def stop_motion_of(self, owner: int | str) -> None:
+        """Stop the motors if ``owner``'s commands are what they follow now."""
         if self.motion_owner == owner:
             self.motion_owner = None
             with contextlib.suppress(rhal.RhalError):
                 await self.driver.stop()
 
+    async def release(self, owner: str) -> None:
+        """The browser lets go or left: its motion stops and the lease is free."""
+        await self.stop_motion_of(owner)
+        if self.lease.release(owner):
+            self._lease_changed()
+
+    async def take_control(self, holder: Holder) -> None:
+        """Staff take over: whoever drove is stopped and now gets a clear error."""
+        previous = self.lease.holder
+        self.lease.acquire(holder, take_over=True)
+        if previous is not None and self.motion_owner == previous.key:
+            await self.stop_motion_of(previous.key)
+        self._lease_changed()
+
     async def _stop_after(self, owner: str, seconds: float) -> None:
         await asyncio.sleep(seconds)
-        await self.release(owner)
+        await self.stop_motion_of(owner)
+
+    def _lease_changed(self) -> None:
+        holder = self.lease.holder.as_dict() if self.lease.holder else None
+        self.publish(self.group, {"type": "robot.lease", "robot": self.name, "holder": holder})
 
     # -- publishing -------------------------------------------------------------------------
 

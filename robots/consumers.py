@@ -13,19 +13,21 @@ from programs.access import runs_for_user
 from programs.models import Run
 from robots.bus import send_to_agent
 from robots.models import get_robot_for_user, robot_group
-from robots.readings import link_error, sensor_rows, show_items
+from robots.readings import sensor_rows, show_items, status
 
 
-def parse_teleop(text: str | None) -> tuple[float, float] | str | None:
-    """(linear, angular), "stop", or None for anything that is not a hand-driving command."""
+def parse_control(text: str | None) -> tuple[str, tuple[float, float] | None] | None:
+    """A control command from the page: ("drive", (linear, angular)), ("stop", None),
+    ("release", None), ("take", None); None for anything else (htmx sends its own frames)."""
     try:
         message = json.loads(text or "")
     except ValueError:
         return None
     if not isinstance(message, dict):
         return None
-    if message.get("stop") is True:
-        return "stop"
+    for flag in ("stop", "release", "take"):
+        if message.get(flag) is True:
+            return flag, None
     drive = message.get("drive")
     if (
         isinstance(drive, list)
@@ -33,7 +35,7 @@ def parse_teleop(text: str | None) -> tuple[float, float] | str | None:
         and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in drive)
         and all(math.isfinite(v) for v in drive)
     ):
-        return float(drive[0]), float(drive[1])
+        return "drive", (float(drive[0]), float(drive[1]))
     return None
 
 
@@ -66,19 +68,40 @@ class RobotConsumer(AsyncWebsocketConsumer):
                 await send_to_agent(self.robot.name, "robot.release", owner=self.channel_name)
 
     async def receive(self, text_data=None, bytes_data=None):
-        """Driving by hand: ``{"drive": [linear, angular]}`` repeated while held, or
-        ``{"stop": true}``. Anything else is ignored: the page also sends htmx's own frames."""
-        command = parse_teleop(text_data)
+        """Driving by hand: ``{"drive": [linear, angular]}`` repeated while held,
+        ``{"stop": true}`` when let go, ``{"release": true}`` to give up control,
+        ``{"take": true}`` for staff to take control over."""
+        command = parse_control(text_data)
         if command is None:
             return
-        if command == "stop":
-            await send_to_agent(self.robot.name, "robot.release", owner=self.channel_name)
-            return
-        self.drove = True
-        linear, angular = command
-        await send_to_agent(
-            self.robot.name, "robot.teleop", owner=self.channel_name, linear=linear, angular=angular
-        )
+        kind, speeds = command
+        user = self.scope["user"]
+        robot, owner = self.robot.name, self.channel_name
+        if kind == "drive":
+            self.drove = True
+            linear, angular = speeds
+            await send_to_agent(
+                robot, "robot.teleop", owner=owner, user=user.get_username(),
+                linear=linear, angular=angular,
+            )  # fmt: skip
+        elif kind == "stop":
+            await send_to_agent(robot, "robot.teleop_stop", owner=owner)
+        elif kind == "release":
+            await send_to_agent(robot, "robot.release", owner=owner)
+        elif kind == "take" and user.is_staff:
+            self.drove = True
+            await send_to_agent(robot, "robot.take_control", owner=owner, user=user.get_username())
+
+    async def robot_lease(self, event):
+        html = render_to_string(
+            "robots/_control.html",
+            {"holder": event["holder"], "mine": self._mine(event["holder"]),
+             "user": self.scope["user"], "oob": True},
+        )  # fmt: skip
+        await self.send(html)
+
+    def _mine(self, holder: dict | None) -> bool:
+        return holder is not None and holder["key"] == self.channel_name
 
     async def robot_teleop_error(self, event):
         html = render_to_string("robots/_teleop_status.html", {"error": event["error"]})
@@ -94,10 +117,10 @@ class RobotConsumer(AsyncWebsocketConsumer):
         await self.send(html)
 
     def _render(self, event: dict, shows_changed: bool) -> str:
-        sensors = event["sensors"]
-        rows = sensor_rows(sensors, event.get("units", {}))
-        context = {"rows": rows, "link_error": link_error(sensors), "oob": True}
+        sensors, units = event["sensors"], event.get("units", {})
+        context = {"rows": sensor_rows(sensors, units), **status(sensors, units), "oob": True}
         html = render_to_string("robots/_sensors.html", context)
+        html += render_to_string("robots/_status.html", context)
         if shows_changed:
             context = {"shows": show_items(self.shows), "oob": True}
             html += render_to_string("robots/_shows.html", context)

@@ -35,3 +35,15 @@ def link_error(sensors: dict) -> str | None:
 
 def show_items(shows: dict) -> list[dict]:
     return [show_item(name, entry) for name, entry in sorted(shows.items())]
+
+
+def status(sensors: dict, units: dict) -> dict:
+    """What the robot's status line says: reachable or not, its battery where it has one."""
+    battery = sensors.get("battery")
+    if isinstance(battery, bool) or not isinstance(battery, (int, float)):
+        battery = None
+    return {
+        "link_error": link_error(sensors),
+        "battery": battery,
+        "battery_unit": units.get("battery", ""),
+    }

@@ -6,6 +6,7 @@ import math
 import time
 
 import rhal
+from robots.lease import Holder, LeaseHeld
 from robots.rpc import (
     INVALID_PARAMS,
     METHOD_NOT_FOUND,
@@ -85,13 +86,20 @@ class RobotApi:
 
     async def drive(self, active, params):
         linear, angular = bind_params(params, ("linear", "angular"), 1)
+        try:
+            self.agent.take_lease(Holder("run", active.run_id, active.user))
+        except LeaseHeld as exc:
+            raise RpcError(ROBOT_ERROR, str(exc)) from None
         applied = await self.agent.driver.drive(linear, 0.0 if angular is None else angular)
         self.agent.motion_owner = active.run_id
         return applied
 
     async def stop(self, active, params):
         bind_params(params, (), 0)
-        await self.agent.driver.stop()
+        # Without control of the robot, a program has no motion to stop: the motors stay
+        # with whoever controls them (stopping is never an error).
+        if self.agent.lease.holder is None or self.agent.lease.holds(active.run_id):
+            await self.agent.driver.stop()
         return None
 
     async def sensors(self, active, params):

@@ -13,7 +13,7 @@ from robots.bus import AgentUnavailable, ask_agent_sync, reconfigure_sync
 from robots.driver_settings import current_values
 from robots.forms import RobotConfigForm
 from robots.models import get_robot_for_user, robots_for_user
-from robots.readings import link_error, sensor_rows, show_items
+from robots.readings import sensor_rows, show_items, status
 
 SNAPSHOT_TIMEOUT = 1.0
 CAMERA_ASKS = threading.BoundedSemaphore(2)
@@ -40,8 +40,10 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
         context["agent_error"] = str(exc)
     else:
         context["rows"] = sensor_rows(state["sensors"], state["units"])
-        context["link_error"] = link_error(state["sensors"])
+        context.update(status(state["sensors"], state["units"]))
         context["camera"] = state["camera"]
+        context["holder"] = state["lease"]
+        context["drive"] = state["drive"]
         context["shows"] = show_items(state["shows"])
     return render(request, "robots/detail.html", context)
 

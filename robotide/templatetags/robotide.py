@@ -30,3 +30,11 @@ def reading(value) -> str:
     if value is None:
         return "—"
     return str(value)
+
+
+@register.filter
+def plottable(value) -> str:
+    """The number a plot takes from a reading, or "" for readings that are no number."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return ""
+    return repr(float(value)) if value == value and abs(value) != float("inf") else ""

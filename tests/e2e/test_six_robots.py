@@ -163,20 +163,31 @@ async def test_a_browser_that_goes_quiet_stops_the_robot(robot_on):
     await page.disconnect()
 
 
-async def test_a_program_driving_is_not_stopped_by_a_browser_leaving(robot_on):
+async def test_while_a_person_drives_a_program_is_refused_with_who_controls(robot_on):
     peer, agent, robot, user = await robot_on("pioneer")
     page = robot_page("pioneer", user)
     assert (await page.connect())[0]
     await page.send_to('{"drive": [0.2, 0.0]}')
     await until(lambda: peer.commanded()[0] > 0, what="driving forward on the wire")
-    source = "import robot, time\nrobot.Robot().drive(0.1, 0.0)\ntime.sleep(60)\n"
+    await page_says(page, "You control the robot")
+    source = (
+        "import robot, time\nbot = robot.Robot()\n"
+        "while True:\n"
+        "    try:\n        bot.drive(0.1, 0.0)\n        break\n"
+        "    except robot.RobotError as exc:\n        print(exc, flush=True)\n"
+        "        time.sleep(0.2)\n"
+        "print('driving', flush=True)\ntime.sleep(60)\n"
+    )
     run = await run_program(user, robot, source)
+    await until(lambda: run.log_path.exists() and "controlled by" in run.log_path.read_text(),
+                what="the program told who controls the robot")  # fmt: skip
+    assert f"controlled by {user.username}, driving by hand" in run.log_path.read_text()
+    await page.disconnect()  # the person leaves: the robot stops and the program may drive
     await until(lambda: peer.commanded()[0] == pytest.approx(0.1), what="the program's speed")
-    await page.disconnect()  # the browser no longer owns the motion: nothing to stop
-    await asyncio.sleep(0.8)  # past the dead-man too
-    assert peer.commanded()[0] == pytest.approx(0.1)
+    assert agent.lease.holds(run.pk)
     await ask_agent("pioneer", "robot.estop")
-    await finished(run)
+    assert (await finished(run)).state == "stopped"
+    assert agent.lease.holder is None
 
 
 async def test_hand_driving_commands_that_are_not_numbers_are_ignored(robot_on):
@@ -259,3 +270,27 @@ async def test_an_unplugged_robot_is_reported_and_comes_back(kind, robot_on):
     assert kind in error and ("reconnect" in error or "lost" in error), error
     assert out.endswith("back")
     await page.disconnect()
+
+
+async def test_staff_take_over_from_a_program_and_students_cannot(robot_on):
+    peer, agent, robot, user = await robot_on("pioneer")
+    source = "import robot, time\nrobot.Robot().drive(0.1, 0.0)\ntime.sleep(60)\n"
+    run = await run_program(user, robot, source)
+    await until(lambda: peer.commanded()[0] > 0, what="the program driving")
+    student = robot_page("pioneer", user)
+    assert (await student.connect())[0]
+    await student.send_to('{"take": true}')  # not staff: ignored
+    await student.send_to('{"drive": [0.0, 1.0]}')
+    await page_says(student, "run #")  # told who controls the robot
+    assert agent.lease.holds(run.pk)
+    teacher = await database_sync_to_async(User.objects.create_user)("teacher", is_staff=True)
+    staff = robot_page("pioneer", teacher)
+    assert (await staff.connect())[0]
+    await staff.send_to('{"take": true}')
+    await until(lambda: peer.commanded() == (0.0, 0.0), what="the program's motion stopped")
+    assert agent.lease.holder.user == "teacher"
+    await staff.send_to('{"drive": [0.0, 1.0]}')
+    await until(lambda: peer.commanded()[1] > 0, what="the teacher turning the robot")
+    await staff.disconnect()
+    await student.disconnect()
+    await ask_agent("pioneer", "robot.estop")
