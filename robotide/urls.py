@@ -31,6 +31,17 @@ urlpatterns = [
     path("robots/", robots.robot_list, name="robot-list"),
     path("robots/<slug:name>/", robots.robot_detail, name="robot-detail"),
     path("robots/<slug:name>/settings", robots.robot_settings, name="robot-settings"),
+    path("robots/<slug:name>/buttons/", robots.robot_buttons, name="robot-buttons"),
+    path(
+        "robots/<slug:name>/buttons/<int:button_id>/delete",
+        robots.robot_button_delete,
+        name="robot-button-delete",
+    ),
+    path(
+        "robots/<slug:name>/buttons/<int:button_id>/press",
+        robots.robot_button_press,
+        name="robot-button-press",
+    ),
     path("robots/<slug:name>/estop", robots.robot_estop, name="robot-estop"),
     path("robots/<slug:name>/run", robots.robot_run, name="robot-run"),
     path("robots/<slug:name>/camera.jpg", robots.robot_camera, name="robot-camera"),

@@ -16,7 +16,7 @@ class RobotAdminForm(RobotConfigForm):
     )
 
     class Meta(RobotConfigForm.Meta):
-        fields = ["name", "url", "description"]
+        fields = ["name", "url", "description", "owner"]
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -35,7 +35,7 @@ class RobotAdminForm(RobotConfigForm):
 @admin.register(Robot)
 class RobotAdmin(admin.ModelAdmin):
     form = RobotAdminForm
-    list_display = ["name", "url", "description", "isolation", "last_seen"]
+    list_display = ["name", "url", "description", "owner", "isolation", "last_seen"]
     readonly_fields = ["isolation", "last_seen"]
     search_fields = ["name", "url", "description"]
 

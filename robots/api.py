@@ -65,7 +65,7 @@ def create_robot(request, data: RobotIn):
     if not request.user.is_staff:
         raise HttpError(403, "Only staff may add robots.")
     try:
-        robot = Robot.objects.create(**data.dict())
+        robot = Robot.objects.create(**data.dict(), owner=request.user)
     except IntegrityError:
         return Status(409, {"detail": f"A robot named {data.name!r} exists already."})
     announce_robot_sync(robot.name)

@@ -1,9 +1,11 @@
+import shlex
 from urllib.parse import urlsplit
 
 from django import forms
 
+from programs.access import programs_for_user
 from robots.driver_settings import add_option_fields, check_settings, known_driver, settings_from
-from robots.models import RUN_SETTINGS, Robot
+from robots.models import RUN_SETTINGS, Robot, RobotButton
 
 
 class RobotConfigForm(forms.ModelForm):
@@ -55,3 +57,41 @@ class RobotConfigForm(forms.ModelForm):
 
 def _scheme(url: str) -> str:
     return urlsplit(url).scheme.lower()
+
+
+class ButtonForm(forms.ModelForm):
+    """A manual command: its label, the program it runs and the arguments it passes."""
+
+    arguments = forms.CharField(
+        required=False,
+        max_length=500,
+        help_text='Passed to the program as its command-line arguments, e.g. 0.3 "slow turn"',
+    )
+
+    class Meta:
+        model = RobotButton
+        fields = ["label", "program", "arguments", "position"]
+
+    def __init__(self, *args, user, robot, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.instance.robot = robot
+        self.fields["program"].queryset = programs_for_user(user)
+        if self.instance.pk:
+            self.fields["arguments"].initial = self.instance.arguments
+
+    def clean_arguments(self):
+        try:
+            return shlex.split(self.cleaned_data["arguments"])
+        except ValueError as exc:  # an unclosed quote
+            raise forms.ValidationError(f"arguments: {exc}") from None
+
+    def clean_label(self):
+        label = self.cleaned_data["label"].strip()
+        taken = RobotButton.objects.filter(robot=self.instance.robot, label=label)
+        if taken.exclude(pk=self.instance.pk).exists():
+            raise forms.ValidationError("This robot has a button with that label already.")
+        return label
+
+    def save(self, commit=True):
+        self.instance.args = self.cleaned_data["arguments"]
+        return super().save(commit)

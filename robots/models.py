@@ -1,9 +1,12 @@
+import shlex
+
+from django.conf import settings as django_settings
 from django.db import models
 from django.http import Http404
 from django.utils import timezone
 
 # Settings for the runs on a robot; anything else in its `settings` goes to its driver.
-RUN_SETTINGS = ("limits", "isolation", "network", "tmp_mb")
+RUN_SETTINGS = ("limits", "isolation", "network", "tmp_mb", "camera")
 
 
 class Robot(models.Model):
@@ -20,12 +23,23 @@ class Robot(models.Model):
     isolation = models.CharField(
         max_length=200, blank=True, editable=False, help_text="What its agent gives each run"
     )
+    owner = models.ForeignKey(
+        django_settings.AUTH_USER_MODEL,
+        null=True,
+        blank=True,
+        on_delete=models.SET_NULL,
+        related_name="robots",
+        help_text="Who looks after it: with staff, configures its buttons",
+    )
 
     class Meta:
         ordering = ["name"]
 
     def __str__(self) -> str:
         return self.name
+
+    def configurable_by(self, user) -> bool:
+        return user.is_staff or (self.owner_id is not None and self.owner_id == user.pk)
 
     def driver_options(self) -> dict:
         """Options for rhal.connect(): the robot's settings but those for its runs."""
@@ -36,6 +50,30 @@ class Robot(models.Model):
 
     def run_isolation(self, defaults: dict) -> dict:
         return {**defaults, **{k: v for k, v in self.settings.items() if k in defaults}}
+
+
+class RobotButton(models.Model):
+    """A manual command on the robot's page: one click runs a program with arguments."""
+
+    robot = models.ForeignKey(Robot, on_delete=models.CASCADE, related_name="buttons")
+    label = models.CharField(max_length=40)
+    program = models.ForeignKey("programs.Program", on_delete=models.CASCADE, related_name="+")
+    args = models.JSONField(default=list, blank=True)
+    position = models.PositiveSmallIntegerField(default=0)
+
+    class Meta:
+        ordering = ["position", "label"]
+        constraints = [
+            models.UniqueConstraint(fields=["robot", "label"], name="unique_button_label")
+        ]
+
+    def __str__(self) -> str:
+        return f"{self.robot.name}: {self.label}"
+
+    @property
+    def arguments(self) -> str:
+        """The arguments as they would be typed: ``dock 'bay two'``."""
+        return shlex.join(self.args)
 
 
 def agent_channel(name: str) -> str:

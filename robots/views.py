@@ -3,16 +3,17 @@ import threading
 from django.contrib import messages
 from django.contrib.admin.views.decorators import staff_member_required
 from django.contrib.auth.decorators import login_required
+from django.core.exceptions import PermissionDenied
 from django.http import HttpRequest, HttpResponse
-from django.shortcuts import redirect, render
+from django.shortcuts import get_object_or_404, redirect, render
 from django.views.decorators.http import require_POST
 
 from programs.access import get_program_for_user, programs_for_user, runs_for_user
 from programs.models import Run, RunRefused, start_run
 from robots.bus import AgentUnavailable, ask_agent_sync, reconfigure_sync
 from robots.driver_settings import current_values
-from robots.forms import RobotConfigForm
-from robots.models import get_robot_for_user, robots_for_user
+from robots.forms import ButtonForm, RobotConfigForm
+from robots.models import RobotButton, get_robot_for_user, robots_for_user
 from robots.readings import sensor_rows, show_items, status
 
 SNAPSHOT_TIMEOUT = 1.0
@@ -29,6 +30,8 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
     robot = get_robot_for_user(request.user, name)
     context = {
         "robot": robot,
+        "buttons": robot.buttons.all(),
+        "can_configure": robot.configurable_by(request.user),
         "options": current_values(robot),
         "running": runs_for_user(request.user).filter(robot=robot, state__in=Run.ACTIVE),
         "programs": programs_for_user(request.user),
@@ -46,6 +49,57 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
         context["drive"] = state["drive"]
         context["shows"] = show_items(state["shows"])
     return render(request, "robots/detail.html", context)
+
+
+@login_required
+def robot_buttons(request: HttpRequest, name: str) -> HttpResponse:
+    """The robot's owner or staff set up its manual commands."""
+    robot = get_robot_for_user(request.user, name)
+    if not robot.configurable_by(request.user):
+        raise PermissionDenied("Only the robot's owner or staff set up its buttons.")
+    button = None
+    if "edit" in request.GET:
+        button = get_object_or_404(RobotButton, robot=robot, pk=request.GET["edit"])
+    form = ButtonForm(request.POST or None, instance=button, user=request.user, robot=robot)
+    if request.method == "POST" and form.is_valid():
+        saved = form.save()
+        messages.success(request, f"Button {saved.label!r} saved.")
+        return redirect("robot-buttons", robot.name)
+    context = {"robot": robot, "form": form, "buttons": robot.buttons.select_related("program")}
+    return render(request, "robots/buttons.html", context)
+
+
+@login_required
+@require_POST
+def robot_button_delete(request: HttpRequest, name: str, button_id: int) -> HttpResponse:
+    robot = get_robot_for_user(request.user, name)
+    if not robot.configurable_by(request.user):
+        raise PermissionDenied("Only the robot's owner or staff set up its buttons.")
+    button = get_object_or_404(RobotButton, robot=robot, pk=button_id)
+    button.delete()
+    messages.success(request, f"Button {button.label!r} removed.")
+    return redirect("robot-buttons", robot.name)
+
+
+@login_required
+@require_POST
+def robot_button_press(request: HttpRequest, name: str, button_id: int) -> HttpResponse:
+    """One click: the button's program runs on the robot, as the person who clicked."""
+    robot = get_robot_for_user(request.user, name)
+    button = get_object_or_404(RobotButton, robot=robot, pk=button_id)
+    try:
+        run = start_run(button.program, robot, request.user, button.args)
+    except RunRefused as exc:
+        outcome = {"error": str(exc)}
+    else:
+        outcome = {"run": run, "button": button}
+    if request.htmx:
+        return render(request, "robots/_button_outcome.html", outcome)
+    if "error" in outcome:
+        messages.error(request, outcome["error"])
+    else:
+        messages.success(request, f"{button.label}: run #{run.pk} started.")
+    return redirect("robot-detail", robot.name)
 
 
 @staff_member_required

@@ -95,3 +95,22 @@ def test_the_emergency_stop_ends_every_program_and_halts_the_robot(page, applian
     expect(reading(page, "velocity.angular")).to_have_attribute("data-value", "0.0")
     expect(page.locator("#control")).to_contain_text("Nobody controls the robot")
     screenshot(page, "robot-after-estop-two-programs")
+
+
+def test_a_command_button_runs_its_program_with_its_arguments(page, appliance, screenshot):
+    appliance.create_program("Say", "import sys\nprint('asked to', ' '.join(sys.argv[1:]))\n")
+    page.goto("/robots/sim/")
+    page.get_by_role("link", name="set up").click()
+    page.get_by_label("Label").fill("Dock")
+    page.get_by_label("Program").select_option(label="Say")
+    page.get_by_label("Arguments").fill('dock "bay two"')
+    page.get_by_role("button", name="Save").click()
+    expect(page.locator("table.list")).to_contain_text("dock 'bay two'")
+    screenshot(page, "robot-buttons")
+    page.get_by_role("link", name="sim").click()
+    page.get_by_role("button", name="Dock").click()
+    outcome = page.locator("#button-outcome")
+    expect(outcome).to_contain_text(re.compile(r"Dock: run #\d+ started"))
+    screenshot(page, "robot-button-pressed")
+    outcome.get_by_role("link").click()
+    expect(page.locator("#log-lines")).to_contain_text("asked to dock bay two")
