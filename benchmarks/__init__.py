@@ -13,4 +13,5 @@ BENCHMARKS = (
     "languages",
     "throughput",
     "drivers",
+    "robot_page",
 )
