@@ -14,4 +14,5 @@ BENCHMARKS = (
     "throughput",
     "drivers",
     "robot_page",
+    "camera",
 )

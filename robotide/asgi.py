@@ -1,5 +1,8 @@
 """Pages and the API through Django's WSGI handler, websockets through Channels, one server.
 
+The live camera (``/robots/<name>/camera.mjpg``) is an endless response: it is answered on the
+event loop by a Channels consumer, so a viewer never holds one of the WSGI worker threads.
+
 Django's ASGI handler hops between the event loop and a thread for each of its (sync)
 middlewares, about 4 ms per request here; under WSGI a request is one hop to a worker thread.
 """
@@ -15,10 +18,11 @@ django_http_app = WSGIMiddleware(get_wsgi_application(), workers=8)
 from channels.auth import AuthMiddlewareStack  # noqa: E402
 from channels.routing import ProtocolTypeRouter, URLRouter  # noqa: E402
 from channels.security.websocket import AllowedHostsOriginValidator  # noqa: E402
-from django.urls import path  # noqa: E402
+from django.urls import path, re_path  # noqa: E402
 
 from programs.consumers import RunConsumer, RunListConsumer  # noqa: E402
 from robotide.security import SameOriginWebsocket  # noqa: E402
+from robots.camera import CameraStream  # noqa: E402
 from robots.consumers import RobotConsumer  # noqa: E402
 
 websocket_urlpatterns = [
@@ -27,9 +31,14 @@ websocket_urlpatterns = [
     path("ws/robots/<slug:name>/", RobotConsumer.as_asgi()),
 ]
 
+http_urlpatterns = [
+    path("robots/<slug:name>/camera.mjpg", AuthMiddlewareStack(CameraStream.as_asgi())),
+    re_path(r"", django_http_app),  # everything else
+]
+
 application = ProtocolTypeRouter(
     {
-        "http": django_http_app,
+        "http": URLRouter(http_urlpatterns),
         "websocket": SameOriginWebsocket(
             AllowedHostsOriginValidator(AuthMiddlewareStack(URLRouter(websocket_urlpatterns)))
         ),

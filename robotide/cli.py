@@ -178,6 +178,12 @@ class _Server(uvicorn.Server):
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.remove_signal_handler(sig)
 
+    async def shutdown(self, sockets=None):
+        from robots.camera import close_streams
+
+        await close_streams()  # camera streams never end by themselves; uvicorn waits for them
+        await super().shutdown(sockets)
+
 
 def cmd_agent(args, rest) -> int:
     from robots.models import Robot

@@ -42,6 +42,7 @@ from programs.supervisor import RunProcess
 from programs.watch import RunWatch, signal_account
 from robots import rpc
 from robots.bus import MANAGER_CHANNEL, RUNS_GROUP, run_group
+from robots.camera import CameraHub
 from robots.lease import ControlLease, Holder, LeaseHeld
 from robots.models import Robot, agent_channel, robot_group
 from robots.robot_api import RobotApi
@@ -97,6 +98,8 @@ class RobotAgent:
         self._opening = asyncio.Lock()
         # More message kinds -> coroutine(message), for parts that live in modules of their own.
         self.handlers: dict[str, Callable[[dict], Awaitable[None]]] = {}
+        self.camera = CameraHub(self)
+        self.handlers.update(self.camera.handlers)
         self._outbox: asyncio.Queue = asyncio.Queue()
         self._tasks: list[asyncio.Task] = []
         self._starting: set[asyncio.Task] = set()
@@ -199,6 +202,7 @@ class RobotAgent:
         watchers = [a.watcher for a in self.runs.values() if a.watcher]
         if watchers:
             await asyncio.wait(watchers, timeout=settings.RUN_DEFAULTS["stop_grace_seconds"] + 2)
+        await self.camera.close()
         await self.server.close()
         shutil.rmtree(self.socket_dir, ignore_errors=True)
         if self.driver is not None:

@@ -17,6 +17,7 @@ from django.conf import settings as django_settings
 import rhal
 from programs.isolation import IsolationUnavailable, Policy
 from programs.launcher import Limits
+from rhal.camera import CameraSettings
 from rhal.options import Option, driver_options, url_options
 from robots.models import RUN_SETTINGS, Robot
 
@@ -35,6 +36,7 @@ def check_settings(url: str, settings: dict) -> None:
     robot = Robot(url=url, settings=settings)
     try:
         Limits.from_settings(settings.get("limits", {}))
+        CameraSettings.parse(settings.get("camera"))
         Policy.from_settings(robot.run_isolation(django_settings.RUN_ISOLATION))
         rhal.connect(url, **robot.driver_options())  # builds the driver, opens nothing
     except (TypeError, ValueError, AttributeError, rhal.RhalError, IsolationUnavailable) as exc:

@@ -11,6 +11,7 @@ from django.views.decorators.http import require_POST
 from programs.access import get_program_for_user, programs_for_user, runs_for_user
 from programs.models import Run, RunRefused, start_run
 from robots.bus import AgentUnavailable, ask_agent_sync, reconfigure_sync
+from robots.camera import has_camera
 from robots.driver_settings import current_values
 from robots.forms import ButtonForm, RobotConfigForm
 from robots.models import RobotButton, get_robot_for_user, robots_for_user
@@ -44,7 +45,7 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
     else:
         context["rows"] = sensor_rows(state["sensors"], state["units"])
         context.update(status(state["sensors"], state["units"]))
-        context["camera"] = state["camera"]
+        context["camera"] = has_camera(robot, state)
         context["holder"] = state["lease"]
         context["drive"] = state["drive"]
         context["shows"] = show_items(state["shows"])
@@ -153,7 +154,7 @@ def robot_camera(request: HttpRequest, name: str) -> HttpResponse:
     if not CAMERA_ASKS.acquire(blocking=False):
         return HttpResponse("camera busy; try again", status=503, content_type="text/plain")
     try:
-        jpeg = ask_agent_sync(robot.name, "robot.camera", timeout=SNAPSHOT_TIMEOUT)["jpeg"]
+        jpeg = ask_agent_sync(robot.name, "camera.snapshot", timeout=SNAPSHOT_TIMEOUT)["jpeg"]
     except AgentUnavailable as exc:
         return HttpResponse(str(exc), status=503, content_type="text/plain")
     finally:

@@ -347,12 +347,9 @@ def test_robot_page_shows_sensors_camera_and_program_drawings(page, appliance, s
     sensors = page.locator("#sensors")
     expect(sensors.locator("th", has_text=re.compile(r"^heading$"))).to_be_visible()
     expect(sensors.locator("th", has_text=re.compile(r"^range$"))).to_be_visible()
-    page.wait_for_function(
-        "() => { const img = document.getElementById('camera');"
-        " return img.complete && img.naturalWidth === 320; }"
-    )
-    # The picture is fetched again and again while the page is open.
-    expect(page.locator("#camera")).to_have_attribute("src", re.compile(r"camera\.jpg\?t=\d+$"))
+    # The live camera: an MJPEG stream in a plain <img>.
+    expect(page.locator("#camera")).to_have_attribute("src", "/robots/sim/camera.mjpg")
+    page.wait_for_function("() => document.getElementById('camera').naturalWidth === 320")
     expect(page.locator("#shows .show")).to_have_count(0)
 
     compass = next(
