@@ -13,6 +13,8 @@ EXAMPLES = {
     "wall.py": "Stop before the wall",
     "hello.sh": "Hello from the shell",
     "any_robot.py": "Any robot: forward, turn, stop",
+    "im_home.py": "I'm home (barcode landmarks)",
+    "voice_move.py": "Say move and the robot moves",
     # The same program in every language: the Robot API is the same in each.
     **{
         f"wall_turn{lang.extension}": f"Wall and turn ({lang.label})" for lang in LANGUAGES.values()

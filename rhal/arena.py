@@ -1,8 +1,10 @@
-"""Walls and box obstacles of the simulated robot's arena.
+"""Walls, box obstacles and landmarks of the simulated robot's arena.
 
 The arena is a rectangle centred on the world origin (x east, y north, metres) with walls on
-all four sides; boxes are axis-aligned rectangles inside it. Geometry is plain float arithmetic:
-it runs on every sensor read.
+all four sides; boxes are axis-aligned rectangles inside it. Landmarks are square codes (QR
+codes, as in "Using barcodes for robotic landmarks", the paper's reference 17) printed on the
+walls, for the robot's front camera to read. Geometry is plain float arithmetic: it runs on
+every sensor read.
 """
 
 from __future__ import annotations
@@ -22,12 +24,44 @@ class Box:
 
 
 @dataclass(frozen=True, slots=True)
+class Landmark:
+    """A square QR code on a wall, seen from the side its normal points to.
+
+    ``x``, ``y`` is the centre of the printed square (quiet zone included) on the wall,
+    ``facing`` the direction in radians (world frame) of its normal, into the arena, ``size``
+    its side and ``height`` the height of its centre above the floor, in metres.
+    """
+
+    text: str
+    x: float
+    y: float
+    facing: float
+    size: float = 0.4
+    height: float = 0.3
+
+
+#: Wall name -> (the direction a code on it faces, into the arena).
+WALL_FACING = {"north": -math.pi / 2, "east": math.pi, "south": math.pi / 2, "west": 0.0}
+
+
+@dataclass(frozen=True, slots=True)
 class Arena:
-    """Walls at x = +-half_width and y = +-half_height, and some boxes inside."""
+    """Walls at x = +-half_width and y = +-half_height, some boxes and landmarks inside."""
 
     half_width: float
     half_height: float
     boxes: tuple[Box, ...] = ()
+    landmarks: tuple[Landmark, ...] = ()
+
+    def on_wall(self, wall: str, along: float, text: str, **options: float) -> Landmark:
+        """A landmark on ``wall`` ("north", "east", "south" or "west"), centred ``along``
+        metres from the wall's middle (east or north of it is positive)."""
+        facing = WALL_FACING[wall]
+        if wall in ("north", "south"):
+            y = self.half_height if wall == "north" else -self.half_height
+            return Landmark(text, along, y, facing, **options)
+        x = self.half_width if wall == "east" else -self.half_width
+        return Landmark(text, x, along, facing, **options)
 
     def clearance(self, x: float, y: float) -> float:
         """Distance from a point to the nearest wall or box surface; 0 or less inside one."""
@@ -77,10 +111,26 @@ def _ordered(a: float, b: float) -> tuple[float, float]:
     return (a, b) if a <= b else (b, a)
 
 
+def _with_landmarks(arena: Arena, *places: tuple[str, float, str]) -> Arena:
+    landmarks = tuple(arena.on_wall(wall, along, text) for wall, along, text in places)
+    return Arena(arena.half_width, arena.half_height, arena.boxes, landmarks)
+
+
+#: The codes on the walls of both arenas: (wall, metres along it, text). "home" is the one the
+#: paper's "I'm home" example looks for.
+LANDMARKS = (
+    ("north", -0.5, "kitchen"),
+    ("east", -0.8, "lab"),
+    ("south", 0.6, "garage"),
+    ("west", 0.3, "home"),
+)
+
 #: Named arenas for the ``arena`` option. Both are 4 m x 4 m; "boxes" adds two obstacles in the
 #: north-east and south-west quarters and leaves the paths due north, east, south and west of
 #: the centre clear, so from the start the range ahead is the 2 m to the wall.
 ARENAS: dict[str, Arena] = {
-    "boxes": Arena(2.0, 2.0, (Box(0.8, 0.5, 1.3, 1.0), Box(-1.5, -1.3, -0.9, -0.7))),
-    "square": Arena(2.0, 2.0),
+    "boxes": _with_landmarks(
+        Arena(2.0, 2.0, (Box(0.8, 0.5, 1.3, 1.0), Box(-1.5, -1.3, -0.9, -0.7))), *LANDMARKS
+    ),
+    "square": _with_landmarks(Arena(2.0, 2.0), *LANDMARKS),
 }

@@ -4,6 +4,11 @@ Options, also accepted in the URL query (``sim://?arena=square&max_linear=0.3``)
 ``arena`` ("boxes", the default, or "square"), ``max_linear``, ``max_angular``; from code also
 ``clock``, a callable returning seconds (default ``time.monotonic``) so tests can step time.
 
+Two cameras: ``camera_jpeg()`` looks down on the arena (the robot's page shows it), and
+``front_camera_jpeg()`` sees what a camera on the robot's nose would: the walls, the boxes and
+the QR code landmarks on the walls, in perspective (``capabilities()["front_camera"]``). The
+Robot API's ``snapshot()`` and ``scan_barcode()`` use the front camera of a driver that has one.
+
 The robot starts at the arena centre (0, 0) facing north. Nothing runs in the background: each
 call first advances the pose from the last update to now along the exact arc of the commanded
 speeds. Travel is checked against walls and boxes every centimetre, so no time step is large
@@ -26,6 +31,8 @@ ROBOT_RADIUS = 0.15  # m
 MAX_RANGE = 4.0  # m, the range sensor's reach
 START_POSE = (0.0, 0.0, math.pi / 2)  # arena centre, facing north
 CAMERA_SIZE = (320, 240)
+FRONT_CAMERA_SIZE = (640, 480)
+FRONT_CAMERA_FOV = 62.0  # degrees, horizontal: a Raspberry Pi camera's
 
 SUBSTEP = 0.01  # m of travel between collision checks; far thinner than any wall or box
 CONTACT_TOLERANCE = 1e-6  # m: how exactly a contact is located
@@ -114,10 +121,21 @@ class SimRobot(Robot):
         width, height = CAMERA_SIZE
         return {"width": width, "height": height, "format": "jpeg"}
 
+    def capabilities(self) -> dict[str, Any]:
+        width, height = FRONT_CAMERA_SIZE
+        front = {"width": width, "height": height, "format": "jpeg", "fov": FRONT_CAMERA_FOV}
+        return {**super().capabilities(), "front_camera": front}
+
     async def _camera_jpeg(self) -> bytes:
         self._advance(self._clock())
         self._derive_readings()
         return await asyncio.to_thread(_render, self._arena, self._pose, self._range, self._bumper)
+
+    async def front_camera_jpeg(self) -> bytes:
+        """What a camera on the robot's nose sees now, as JPEG bytes."""
+        self._require_open()
+        self._advance(self._clock())
+        return await asyncio.to_thread(_render_front, self._arena, self._pose)
 
     # -- simulation ------------------------------------------------------------------------
 
@@ -186,3 +204,10 @@ def _render(arena: Arena, pose: Pose, range_m: float, bumper: bool) -> bytes:
     from rhal.sim_render import render_top_view
 
     return render_top_view(arena, pose, ROBOT_RADIUS, range_m, bumper, CAMERA_SIZE)
+
+
+def _render_front(arena: Arena, pose: Pose) -> bytes:
+    from rhal.sim_render import render_front_view
+
+    fov = math.radians(FRONT_CAMERA_FOV)
+    return render_front_view(arena, pose, ROBOT_RADIUS, FRONT_CAMERA_SIZE, fov)

@@ -19,6 +19,7 @@ from programs.isolation import IsolationUnavailable, Policy
 from programs.launcher import Limits
 from rhal.camera import CameraSettings
 from rhal.options import Option, driver_options, url_options
+from robots.host_services import check_speech_settings
 from robots.models import RUN_SETTINGS, Robot
 
 
@@ -37,6 +38,7 @@ def check_settings(url: str, settings: dict) -> None:
     try:
         Limits.from_settings(settings.get("limits", {}))
         CameraSettings.parse(settings.get("camera"))
+        check_speech_settings(settings.get("speech"))
         Policy.from_settings(robot.run_isolation(django_settings.RUN_ISOLATION))
         rhal.connect(url, **robot.driver_options())  # builds the driver, opens nothing
     except (TypeError, ValueError, AttributeError, rhal.RhalError, IsolationUnavailable) as exc:

@@ -6,7 +6,7 @@ from django.http import Http404
 from django.utils import timezone
 
 # Settings for the runs on a robot; anything else in its `settings` goes to its driver.
-RUN_SETTINGS = ("limits", "isolation", "network", "tmp_mb", "camera")
+RUN_SETTINGS = ("limits", "isolation", "network", "tmp_mb", "camera", "speech")
 
 
 class Robot(models.Model):

@@ -6,6 +6,7 @@ import math
 import time
 
 import rhal
+from robots.host_services import HostServices
 from robots.lease import Holder, LeaseHeld
 from robots.rpc import (
     INVALID_PARAMS,
@@ -42,6 +43,8 @@ class RobotApi:
             "memory_set": self.memory_set,
             "memory_get": self.memory_get,
         }
+        # The paper's phone services: speech, the camera, barcodes, listening.
+        self.methods.update(HostServices(agent).methods)
         self.topics: dict[str, set[asyncio.Queue]] = {}
         self.memory: dict[str, object] = {}
 

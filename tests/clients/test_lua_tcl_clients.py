@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from programs.languages import CLIENTS_DIR
+from robots.host_services import HostServices
 from tests.robot_api_server import admit, check_wall_turn
 
 EXAMPLES = CLIENTS_DIR.parent / "examples"
@@ -485,3 +486,53 @@ async def test_the_wall_turn_example(agent, language):
     program = EXAMPLES / f"wall_turn.{LANGUAGES[language][1]}"
     status, out, err = await finish(await start(agent, language, program), timeout=60)
     await check_wall_turn(agent, status, out, err)
+
+
+# ---------------------------------------------------------------------------------------------
+# the host's services: speech and the camera
+
+
+@pytest.fixture
+async def host_agent(agent):
+    agent.api.methods.update(HostServices(agent).methods)  # as RobotApi registers them
+    admit(agent)
+    return agent
+
+
+HOST_SERVICES = {
+    "lua": """\
+local Robot = require('robot')
+local bot = Robot.new()
+local said = bot:say('hello from Lua')
+print(type(said.spoken))
+local codes = bot:scan_barcode()
+print(#codes, codes[1].text, codes[1].format, #codes[1].position)
+local frame = bot:snapshot()
+print(frame.width, frame.height, #frame.jpeg > 1000)
+""",
+    "tcl": """\
+package require robot
+set said [robot::say "hello from Tcl"]
+puts [expr {[dict get $said spoken] in {true false}}]
+set codes [robot::scan_barcode]
+set code [lindex $codes 0]
+set corners [llength [dict get $code position]]
+puts "[llength $codes] [dict get $code text] [dict get $code format] $corners"
+set frame [robot::snapshot]
+set large [expr {[string length [dict get $frame jpeg]] > 1000}]
+puts "[dict get $frame width] [dict get $frame height] $large"
+""",
+}
+
+
+@each_language
+@pytest.mark.django_db(transaction=True)  # the robot's speech and camera settings: from its row
+async def test_say_and_scan_barcode(host_agent, language, tmp_path):
+    status, out, err = await run(host_agent, language, HOST_SERVICES[language], tmp_path)
+    assert status == 0, err
+    spoken, codes, frame = out.splitlines()
+    assert spoken in ("boolean", "1")
+    assert codes.split() == ["1", "kitchen", "QRCode", "4"]  # ahead of the sim robot at start
+    assert frame.split()[:2] == ["640", "480"] and frame.split()[2] in ("true", "1")
+    expected = "hello from Lua" if language == "lua" else "hello from Tcl"
+    assert host_agent.shows["said"]["value"] == expected

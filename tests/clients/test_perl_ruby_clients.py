@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from programs.languages import CLIENTS_DIR
+from robots.host_services import HostServices
 from tests.robot_api_server import admit, check_wall_turn
 
 EXAMPLES = CLIENTS_DIR.parent / "examples"
@@ -312,3 +313,52 @@ async def test_the_wall_turn_example(agent, language):
     program = EXAMPLES / f"wall_turn.{LANGUAGES[language][1]}"
     status, out, err = await finish(await start(agent, language, program), timeout=60)
     await check_wall_turn(agent, status, out, err)
+
+
+# -- the host's services: speech and the camera ----------------------------------------------
+
+HOST_SERVICES = {
+    "perl": """\
+use strict; use warnings;
+use JSON::PP;
+use Robot;
+my $bot = Robot->new;
+my $said = $bot->say('hello from Perl');
+my $codes = $bot->scan_barcode;
+my $frame = $bot->snapshot;
+print JSON::PP->new->canonical->encode({
+    spoken => JSON::PP::is_bool($said->{spoken}) ? 'boolean' : 'other',
+    codes => [map { [$_->{text}, $_->{format}, scalar @{$_->{position}}] } @$codes],
+    size => [$frame->{width}, $frame->{height}],
+}), "\\n";
+""",
+    "ruby": """\
+require 'json'
+require 'robot'
+bot = Robot.new
+said = bot.say('hello from Ruby')
+codes = bot.scan_barcode
+frame = bot.snapshot
+puts JSON.generate({
+  spoken: [true, false].include?(said['spoken']) ? 'boolean' : 'other',
+  codes: codes.map { |code| [code['text'], code['format'], code['position'].length] },
+  size: [frame['width'], frame['height']],
+})
+""",
+}
+
+
+@each_language
+@pytest.mark.django_db(transaction=True)  # the robot's speech and camera settings: from its row
+async def test_say_and_scan_barcode(agent, language, tmp_path):
+    agent.api.methods.update(HostServices(agent).methods)  # as RobotApi registers them
+    admit(agent)
+    status, out, err = await run(agent, language, HOST_SERVICES[language], tmp_path)
+    assert status == 0 and err == "", err
+    assert json.loads(out) == {
+        "spoken": "boolean",
+        "codes": [["kitchen", "QRCode", 4]],  # ahead of the sim robot at the start
+        "size": [640, 480],
+    }
+    expected = "hello from Perl" if language == "perl" else "hello from Ruby"
+    assert agent.shows["said"]["value"] == expected

@@ -7,6 +7,12 @@
 -- bot:show('heading', 42)               -- appears live on the robot's page
 -- bot:stop()
 --
+-- The robot's computer lends its senses and voice:
+-- bot:say("I'm home")                   -- spoken, and shown on the robot's page
+-- bot:snapshot()                        -- {jpeg = base64 text, width = .., height = ..}
+-- bot:scan_barcode()                    -- {{text = 'home', format = 'QRCode', position = {...}}}
+-- bot:listen(3, nil, {'move', 'stop'}).text  -- 'move', or '' when none was heard
+--
 -- An error the robot reports (a sensor it lacks, an unknown method) is raised with error():
 -- a message string with the robot's message and code in it; bot.last_error holds it as a table
 -- {code = -32000, message = '...', data = ...}. Use pcall to catch it.
@@ -167,6 +173,32 @@ end
 --- The value stored under `key`, or nil.
 function Robot:memory_get(key)
   local result = self:_call(3, 'memory_get', table.pack(key))
+  return result
+end
+
+--- Speaks `text` (shown on the robot's page too); returns {spoken = true or false, seconds,
+--- or reason = why not}.
+function Robot:say(text)
+  local result = self:_call(3, 'say', table.pack(text))
+  return result
+end
+
+--- The camera's frame now: {jpeg = the JPEG in base64, width = .., height = ..}.
+function Robot:snapshot()
+  local result = self:_call(3, 'snapshot', { n = 0 })
+  return result
+end
+
+--- The barcodes and QR codes in view: an array of {text, format, position}.
+function Robot:scan_barcode()
+  local result = self:_call(3, 'scan_barcode', { n = 0 })
+  return result
+end
+
+--- Recognises speech: `seconds` from the microphone (nil: 5), or the WAV file `wav` in the
+--- program's folder; `words` (an array) listens for those only. Returns {text, words}.
+function Robot:listen(seconds, wav, words)
+  local result = self:_call(3, 'listen', table.pack(seconds, wav, words))
   return result
 end
 

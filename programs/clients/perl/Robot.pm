@@ -12,6 +12,12 @@
 #   $bot->publish('ping', { n => 1 });
 #   $bot->memory_set('best', 3.2);  $bot->memory_get('best');
 #
+# The robot's computer lends its senses and voice:
+#   $bot->say("I'm home");                 # spoken, and shown on the robot's page
+#   $bot->snapshot;                        # { jpeg => base64 text, width => .., height => .. }
+#   $bot->scan_barcode;                    # [ { text => 'home', format => 'QRCode', position => [...] } ]
+#   $bot->listen(3, undef, ['move', 'stop'])->{text};  # 'move', or '' when none was heard
+#
 # Any other method: $bot->call('method', @params). An error the robot reports dies with a
 # Robot::Error object: $@->message, $@->code; as a string "robot: MESSAGE at FILE line N.".
 
@@ -118,6 +124,18 @@ sub memory_get   { $_[0]->call('memory_get', $_[1]) }
 sub receive {
     my ($self, $topic, $timeout) = @_;
     return $self->call('receive', $topic, defined $timeout ? _number(timeout => $timeout) : undef);
+}
+
+sub say          { $_[0]->call('say', $_[1]) }    # { spoken => 1 or 0, seconds, or reason }
+sub snapshot     { $_[0]->call('snapshot') }
+sub scan_barcode { $_[0]->call('scan_barcode') }
+
+# Speech recognised: $seconds from the microphone (default 5), or the WAV file $wav in the
+# program's folder; $words (an array ref) listens for those only. Returns { text, words }.
+sub listen {
+    my ($self, $seconds, $wav, $words) = @_;
+    return $self->call('listen', defined $seconds ? _number(seconds => $seconds) : undef,
+        $wav, $words);
 }
 
 sub close {

@@ -13,6 +13,12 @@ bot.receive("speed", 5.0)        # the next value, or None after 5 s (no timeout
 bot.publish("speed", 0.2)        # any JSON value; returns how many subscribers it reached
 bot.memory_set("laps", 3)
 bot.memory_get("laps")           # 3, or None if nothing is kept under that key
+
+The robot's computer lends its senses and voice:
+bot.say("I'm home")              # spoken, and shown on the robot's page
+bot.snapshot()                   # {"jpeg": base64 text, "width": .., "height": ..}
+bot.scan_barcode()               # [{"text": "home", "format": "QRCode", "position": [...]}]
+bot.listen(3, words=["move", "stop"])  # {"text": "move", "words": ["move"]}
 """
 
 import json
@@ -122,6 +128,25 @@ class Robot:
     def memory_get(self, key):
         """The value kept under `key`, or None."""
         return self.call("memory_get", key)
+
+    def say(self, text):
+        """Speak `text` (shown on the robot's page too); returns {"spoken": True or False,
+        "seconds": .., or "reason": why not}."""
+        return self.call("say", text)
+
+    def snapshot(self):
+        """The camera's frame now: {"jpeg": the JPEG in base64, "width": .., "height": ..}."""
+        return self.call("snapshot")
+
+    def scan_barcode(self):
+        """The barcodes and QR codes in view: a list of {"text", "format", "position"}."""
+        return self.call("scan_barcode")
+
+    def listen(self, seconds=5, wav=None, words=None):
+        """Recognise speech: `seconds` from the microphone, or the WAV file `wav` in the
+        program's folder; `words` (a list) listens for those only. Returns {"text", "words"}:
+        with `words`, the text is one of them, or "" if none was heard."""
+        return self.call("listen", seconds, wav, words)
 
     def close(self):
         self._file.close()

@@ -12,6 +12,12 @@
 #   bot.publish('ping', { 'n' => 1 })
 #   bot.memory_set('best', 3.2); bot.memory_get('best')
 #
+# The robot's computer lends its senses and voice:
+#   bot.say("I'm home")         # spoken, and shown on the robot's page
+#   bot.snapshot                # { 'jpeg' => base64 text, 'width' => .., 'height' => .. }
+#   bot.scan_barcode            # [{ 'text' => 'home', 'format' => 'QRCode', 'position' => [...] }]
+#   bot.listen(3, words: %w[move stop])['text'] # 'move', or '' when none was heard
+#
 # Any other method: bot.call('method', *params). An error the robot reports raises
 # Robot::Error, with #message and #code.
 
@@ -77,6 +83,16 @@ class Robot
   # (no timeout: wait for ever).
   def receive(topic, timeout = nil)
     call('receive', topic, timeout.nil? ? nil : number(timeout))
+  end
+
+  def say(text) = call('say', text) # { 'spoken' => true or false, 'seconds', or 'reason' }
+  def snapshot = call('snapshot')
+  def scan_barcode = call('scan_barcode')
+
+  # Speech recognised: seconds from the microphone, or the WAV file wav in the program's
+  # folder; words (an array) listens for those only. Returns { 'text', 'words' }.
+  def listen(seconds = 5, wav: nil, words: nil)
+    call('listen', number(seconds), wav, words)
   end
 
   def close

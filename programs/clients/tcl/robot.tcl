@@ -5,6 +5,9 @@
 #   puts [dict get [robot::sensors] heading]
 #   robot::show heading 42              ;# appears live on the robot's page
 #   robot::stop
+#   robot::say "I'm home"               ;# spoken, and shown on the robot's page
+#   foreach code [robot::scan_barcode] { puts [dict get $code text] }  ;# the codes in view
+#   dict get [robot::listen 3 "" {move stop}] text   ;# move, or "" when none was heard
 #
 # The first command connects with $ROBOT_API_TCP (Tcl has no Unix sockets; else $ROBOT_API if it
 # is host:port) and $ROBOT_TOKEN; robot::connect ?address? ?token? does it explicitly. Where no
@@ -28,7 +31,7 @@ namespace eval robot {
     variable next_id 0
     variable here [file dirname [file normalize [info script]]]
     namespace export drive stop sensors sensor capabilities show publish subscribe receive \
-        memory_set memory_get call connect close
+        memory_set memory_get say snapshot scan_barcode listen call connect close
 }
 
 namespace eval robot::json {
@@ -280,6 +283,39 @@ proc robot::memory_set {key value} {
 # The value stored under key, or "".
 proc robot::memory_get {key} {
     return [Request memory_get [list [json::string $key]]]
+}
+
+# Speaks text (shown on the robot's page too); returns a dict: spoken (true or false), and
+# seconds, or reason when it was not spoken.
+proc robot::say {text} {
+    return [Request say [list [json::string $text]]]
+}
+
+# The camera's frame now: a dict of jpeg (the JPEG in base64), width and height.
+proc robot::snapshot {} {
+    return [Request snapshot {}]
+}
+
+# The barcodes and QR codes in view: a list of dicts of text, format and position.
+proc robot::scan_barcode {} {
+    return [Request scan_barcode {}]
+}
+
+# Recognises speech: seconds from the microphone, or the WAV file wav in the program's folder
+# ("" : none); words, a list, listens for those only. Returns a dict of text and words.
+proc robot::listen {{seconds 5} {wav ""} {words ""}} {
+    set params [list [json::number $seconds]]
+    lappend params [expr {$wav eq "" ? "null" : [json::string $wav]}]
+    if {[llength $words] == 0} {
+        lappend params null
+    } else {
+        set items {}
+        foreach word $words {
+            lappend items [json::string $word]
+        }
+        lappend params "\[[join $items ,]\]"
+    }
+    return [Request listen $params]
 }
 
 package provide robot 1.0

@@ -8,6 +8,8 @@
  *   console.log((await bot.sensors()).heading); // compass, degrees
  *   await bot.show('heading', 42);              // appears live on the robot's page
  *   await bot.stop();
+ *   await bot.say("I'm home");                  // spoken, and shown on the robot's page
+ *   (await bot.scan_barcode()).map((code) => code.text); // the codes in view: ['home']
  *
  * Every method returns a Promise; an error the robot reports rejects it with a RobotError
  * (an Error with `code` and `data`). The connection is made by the first call and
@@ -105,6 +107,29 @@ class Robot {
   /** The value kept under `key`, or null. */
   memory_get(key) {
     return this.call('memory_get', key);
+  }
+
+  /** Speak `text` (shown on the robot's page too); resolves to {spoken, seconds or reason}. */
+  say(text) {
+    return this.call('say', text);
+  }
+
+  /** The camera's frame now: {jpeg: the JPEG in base64, width, height}. */
+  snapshot() {
+    return this.call('snapshot');
+  }
+
+  /** The barcodes and QR codes in view: an array of {text, format, position}. */
+  scan_barcode() {
+    return this.call('scan_barcode');
+  }
+
+  /**
+   * Recognise speech: `seconds` from the microphone, or the WAV file `wav` in the program's
+   * folder; `words` (an array) listens for those only. Resolves to {text, words}.
+   */
+  listen(seconds = 5, wav = null, words = null) {
+    return this.call('listen', seconds, wav, words);
   }
 
   /** End the connection; calls still waiting are rejected. */

@@ -1,0 +1,631 @@
+"""Host services as Robot API methods: what the paper's phone gave its programs besides the
+robot itself, done by the computer the agent runs on, offline.
+
+- ``say(text)``: speech through espeak-ng; the text is shown on the robot's page too, as the
+  value named ``said``, so a robot without sound (or without espeak-ng) still says it.
+  Utterances take turns, one at a time per robot, in the order they came (a queue of at most
+  ``MAX_SAY_WAITING``); the call returns once the utterance has been spoken.
+- ``snapshot()``: the camera's current frame, a JPEG in base64.
+- ``scan_barcode()``: the barcodes and QR codes in the current frame (zxing-cpp).
+- ``listen(seconds, wav, words)``: speech recognised by pocketsphinx with the en-us model its
+  package ships, from the robot's microphone or a WAV file in the program's folder; ``words``
+  narrows what it listens for to a few commands, which makes them far more reliable.
+
+Which camera: the device in the robot's ``camera`` setting (a V4L2 camera through ffmpeg, as
+the agent's camera hub streams it to the page) when there is one; else the driver's front
+camera (``front_camera_jpeg()``: the sim robot's view from its nose, where the landmarks are);
+else the driver's own camera (``camera_jpeg()``).
+
+The robot's setting ``speech`` (an object) configures speech: ``voice`` (espeak-ng's, default
+en-us), ``speed`` (words per minute, 80-450, default 160), ``pitch`` (0-99), ``amplitude``
+(0-200), ``device`` (the sound device espeak-ng plays on), ``wav`` (a file to write the speech
+to instead of playing it), ``microphone`` (the device listen() records from). It is read from
+the robot's row at each call, so a change applies at once.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import contextlib
+import io
+import itertools
+import math
+import os
+import re
+import shutil
+import stat
+import threading
+import time
+import wave
+from pathlib import Path, PurePosixPath
+
+from channels.db import database_sync_to_async
+from django.conf import settings
+
+import rhal
+from programs.isolation import InForce
+from rhal.camera import FfmpegCamera
+from robots.models import Robot
+from robots.rpc import ROBOT_ERROR, RpcError, bind_params
+
+MAX_SAY_CHARS = 500
+MAX_SAY_WAITING = 8  # utterances queued behind the one being spoken
+SAY_TIMEOUT = 120.0  # s: longer than the longest text takes at the slowest speed
+DEFAULT_VOICE = "en-us"  # the accent listen()'s model knows best
+DEFAULT_SPEED = 160  # words per minute
+MAX_LISTEN_SECONDS = 30.0
+MAX_AUDIO_SECONDS = 60.0  # of a WAV file
+MAX_AUDIO_BYTES = 32 * 1024 * 1024
+MAX_PHRASES = 100
+SAMPLE_RATE = 16000  # what the recogniser's model was trained on
+
+SPEECH_SETTINGS = ("voice", "speed", "pitch", "amplitude", "device", "wav", "microphone")
+_VOICE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_+/-]{0,63}")
+_WORD = re.compile(r"[a-z][a-z'.-]*")
+
+
+class HostServices:
+    """The host's services for the programs of one agent's robot."""
+
+    def __init__(self, agent):
+        self.agent = agent
+        self._speaking = asyncio.Lock()
+        self._waiting = 0
+        self._camera_lock = asyncio.Lock()
+        self.methods = {
+            "say": self.say,
+            "snapshot": self.snapshot,
+            "scan_barcode": self.scan_barcode,
+            "listen": self.listen,
+        }
+
+    # -- speech -----------------------------------------------------------------------------
+
+    async def say(self, active, params):
+        (text,) = bind_params(params, ("text",), 1)
+        if not isinstance(text, str) or not text.strip():
+            raise ValueError("say() needs a text to say")
+        if len(text) > MAX_SAY_CHARS:
+            raise ValueError(f"say() says at most {MAX_SAY_CHARS} characters at a time")
+        speech = await self.speech_settings()
+        if self._waiting >= MAX_SAY_WAITING:
+            raise RpcError(
+                ROBOT_ERROR, f"the robot has {MAX_SAY_WAITING} things to say already: wait"
+            )
+        self._waiting += 1
+        try:
+            await self._speaking.acquire()
+        finally:
+            self._waiting -= 1
+        try:
+            await self._show_said(active, text)
+            return await speak(text, speech)
+        finally:
+            self._speaking.release()
+
+    async def _show_said(self, active, text: str) -> None:
+        """The robot's page shows what it says, as the value named "said"."""
+        with contextlib.suppress(ValueError):  # no room among the shown values: still speak
+            await self.agent.api.show(active, ["said", text])
+
+    async def speech_settings(self) -> dict:
+        """The robot's ``speech`` setting, checked; {} for a robot without one."""
+        raw = await database_sync_to_async(_speech_setting)(self.agent.name)
+        try:
+            return check_speech_settings(raw)
+        except ValueError as exc:
+            raise RpcError(ROBOT_ERROR, f"the robot's speech setting is wrong: {exc}") from None
+
+    async def listen(self, active, params):
+        seconds, wav, words = bind_params(params, ("seconds", "wav", "words"), 0)
+        seconds = _listen_seconds(seconds)
+        phrases = _phrases(words)
+        if phrases:  # refused before anything is recorded
+            await asyncio.to_thread(RECOGNISER.check, phrases)
+        if wav is not None:
+            data = await asyncio.to_thread(read_program_file, wav, workdir_of(active.run_id))
+            pcm = await audio_to_pcm(data)
+        else:
+            speech = await self.speech_settings()
+            pcm = await record(seconds, speech.get("microphone"))
+        return await asyncio.to_thread(RECOGNISER.recognise, pcm, phrases)
+
+    # -- the camera -------------------------------------------------------------------------
+
+    async def snapshot(self, active, params):
+        bind_params(params, (), 0)
+        jpeg, width, height = await asyncio.to_thread(as_jpeg, await self.frame())
+        return {"jpeg": base64.b64encode(jpeg).decode("ascii"), "width": width, "height": height}
+
+    async def scan_barcode(self, active, params):
+        bind_params(params, (), 0)
+        return await asyncio.to_thread(read_barcodes, await self.frame())
+
+    async def frame(self) -> bytes:
+        """The current camera frame, as image bytes (JPEG), from the best camera there is."""
+        jpeg = await self._camera_device_frame()
+        if jpeg is not None:
+            return jpeg
+        driver = self.agent.driver
+        front = getattr(driver, "front_camera_jpeg", None)
+        if front is not None:
+            return await front()
+        if driver.capabilities().get("camera") is None:
+            raise rhal.NotSupportedError(
+                f"the {driver.kind} robot has no camera: snapshot() and scan_barcode() need one"
+            )
+        return await driver.camera_jpeg()
+
+    async def _camera_device_frame(self) -> bytes | None:
+        """A frame of the device in the robot's ``camera`` setting (a V4L2 camera through
+        ffmpeg), or None when it names none. While the robot's page shows the camera, that
+        stream's newest frame; else one taken now (the hub's lock: one ffmpeg per device)."""
+        hub = getattr(self.agent, "camera", None)
+        if hub is None:
+            return None
+        try:
+            camera = await hub.settings()
+        except Robot.DoesNotExist:
+            return None
+        except ValueError as exc:
+            raise RpcError(ROBOT_ERROR, f"the robot's camera setting is wrong: {exc}") from None
+        if not camera.device:
+            return None
+        if isinstance(hub.source, FfmpegCamera) and hub.latest is not None:
+            return hub.latest
+        async with getattr(hub, "_snapshot_lock", self._camera_lock):
+            source = FfmpegCamera(camera)
+            try:
+                await source.start()
+                return await source.frame()
+            finally:
+                await source.close()
+
+
+# -- speaking -------------------------------------------------------------------------------
+
+
+def _speech_setting(name: str):
+    robot = Robot.objects.filter(name=name).only("settings").first()
+    return {} if robot is None else robot.settings.get("speech", {})
+
+
+def check_speech_settings(raw) -> dict:
+    """A robot's ``speech`` setting as say() and listen() use it; ValueError if it is wrong."""
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict):
+        raise ValueError('speech must be an object, e.g. {"voice": "en-us", "speed": 160}')
+    unknown = set(raw) - set(SPEECH_SETTINGS)
+    if unknown:
+        known = ", ".join(SPEECH_SETTINGS)
+        raise ValueError(f"unknown speech setting(s) {', '.join(sorted(unknown))}; known: {known}")
+    speech = dict(raw)
+    if "voice" in speech and not (
+        isinstance(speech["voice"], str) and _VOICE.fullmatch(speech["voice"])
+    ):
+        raise ValueError(
+            f"voice must be an espeak-ng voice name, e.g. en-us, not {speech['voice']!r}"
+        )
+    for name, low, high in (("speed", 80, 450), ("pitch", 0, 99), ("amplitude", 0, 200)):
+        value = speech.get(name)
+        if value is not None and (
+            isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high
+        ):
+            raise ValueError(f"{name} must be a whole number from {low} to {high}")
+    for name in ("device", "microphone"):
+        value = speech.get(name)
+        if name == "microphone" and isinstance(value, int) and not isinstance(value, bool):
+            continue  # a device's index, as sounddevice numbers them
+        if value is not None and not (isinstance(value, str) and 0 < len(value) <= 200):
+            raise ValueError(f"{name} must be a sound device's name")
+        if isinstance(value, str) and value.startswith("-"):
+            raise ValueError(f"{name} must be a sound device's name, not {value!r}")
+    wav = speech.get("wav")
+    if wav is not None and not (isinstance(wav, str) and os.path.isabs(wav)):
+        raise ValueError("wav must be the absolute path of a file to write the speech to")
+    return speech
+
+
+async def speak(text: str, speech: dict) -> dict:
+    """Say ``text`` with espeak-ng, on the sound device or into the speech setting's WAV file.
+
+    Returns {"spoken": true, "seconds": how long it took (or lasts, in a file)}, or
+    {"spoken": false, "reason": why}: a computer without sound still shows what was said.
+    """
+    espeak = shutil.which("espeak-ng")
+    if espeak is None:
+        return {
+            "spoken": False,
+            "reason": "espeak-ng is not installed on this computer (apt-get install espeak-ng):"
+            " the text is only shown on the robot's page",
+        }
+    argv = [
+        espeak, "--stdin", "-v", speech.get("voice", DEFAULT_VOICE),
+        "-s", str(speech.get("speed", DEFAULT_SPEED)),
+    ]  # fmt: skip
+    for name, option in (("pitch", "-p"), ("amplitude", "-a")):
+        if name in speech:
+            argv += [option, str(speech[name])]
+    wav = speech.get("wav")
+    if wav is not None:
+        argv += ["-w", wav]
+    elif "device" in speech:
+        argv += ["-d", speech["device"]]
+    started = time.monotonic()
+    process = await asyncio.create_subprocess_exec(
+        *argv,
+        stdin=asyncio.subprocess.PIPE,
+        stdout=asyncio.subprocess.DEVNULL,
+        stderr=asyncio.subprocess.PIPE,
+    )
+    try:
+        _, err = await asyncio.wait_for(process.communicate(text.encode()), SAY_TIMEOUT)
+    except TimeoutError:
+        return {"spoken": False, "reason": f"espeak-ng was still speaking after {SAY_TIMEOUT} s"}
+    finally:
+        if process.returncode is None:  # timed out, or the call was cancelled
+            process.kill()
+            await process.wait()
+    problems = _espeak_problems(err.decode(errors="replace"))
+    if process.returncode != 0 or problems:
+        why = "; ".join(problems) or f"espeak-ng ended with status {process.returncode}"
+        if wav is None:
+            why = f"no sound: {why}"
+            if not Path("/dev/snd").exists():
+                why += " (this computer has no sound card)"
+        return {"spoken": False, "reason": f"{why}; the text is only shown on the robot's page"}
+    if wav is not None:
+        return {"spoken": True, "seconds": round(_wav_seconds(wav), 3), "wav": wav}
+    return {"spoken": True, "seconds": round(time.monotonic() - started, 3)}
+
+
+def _espeak_problems(stderr: str) -> list[str]:
+    """espeak-ng's own complaints (it may still exit 0), without ALSA's chatter before them."""
+    lines = [line.strip() for line in stderr.splitlines() if line.strip()]
+    return [
+        line
+        for line in lines
+        if not line.startswith("ALSA lib") and re.match(r"(error|can't|cannot)\b", line, re.I)
+    ]
+
+
+def _wav_seconds(path: str) -> float:
+    with wave.open(path) as recording:
+        return recording.getnframes() / recording.getframerate()
+
+
+# -- images and barcodes --------------------------------------------------------------------
+
+
+def as_jpeg(image: bytes) -> tuple[bytes, int, int]:
+    """The frame as JPEG bytes (converted if it is another format), and its size."""
+    from PIL import Image
+
+    with Image.open(io.BytesIO(image)) as picture:
+        width, height = picture.size
+        if picture.format == "JPEG":
+            return image, width, height
+        buffer = io.BytesIO()
+        picture.convert("RGB").save(buffer, "JPEG", quality=90)
+        return buffer.getvalue(), width, height
+
+
+def read_barcodes(image: bytes) -> list[dict]:
+    """Every barcode and QR code zxing-cpp finds in the image: its text, its format (a name
+    such as QRCode or EAN13) and its corners in pixels, clockwise from its top left."""
+    import numpy as np
+    import zxingcpp
+    from PIL import Image
+
+    with Image.open(io.BytesIO(image)) as picture:
+        grey = np.asarray(picture.convert("L"))
+    found = []
+    for code in zxingcpp.read_barcodes(grey):
+        corners = code.position
+        found.append(
+            {
+                "text": code.text,
+                "format": code.format.name,
+                "position": [
+                    [point.x, point.y]
+                    for point in (
+                        corners.top_left,
+                        corners.top_right,
+                        corners.bottom_right,
+                        corners.bottom_left,
+                    )
+                ],
+            }
+        )
+    return found
+
+
+# -- listening ------------------------------------------------------------------------------
+
+
+def _listen_seconds(seconds) -> float:
+    if seconds is None:
+        return 5.0
+    if (
+        isinstance(seconds, bool)
+        or not isinstance(seconds, int | float)
+        or not 0 < seconds <= MAX_LISTEN_SECONDS
+    ):
+        raise ValueError(f"seconds must be a number above 0, at most {MAX_LISTEN_SECONDS:g}")
+    return float(seconds)
+
+
+def _phrases(words) -> tuple[str, ...]:
+    """The words or phrases to listen for, lower case and single-spaced; () for any speech."""
+    if words is None:
+        return ()
+    if isinstance(words, str):
+        words = [words]
+    if not isinstance(words, list) or not 0 < len(words) <= MAX_PHRASES:
+        raise ValueError(f"words must be a list of 1 to {MAX_PHRASES} words or phrases")
+    phrases = []
+    for phrase in words:
+        if not isinstance(phrase, str) or not phrase.strip() or len(phrase) > 100:
+            raise ValueError(f"each of words must be a word or a short phrase, not {phrase!r}")
+        normal = " ".join(phrase.lower().split())
+        for word in normal.split():
+            if not _WORD.fullmatch(word):
+                raise ValueError(f"{word!r} in words is not a word")
+        if normal not in phrases:
+            phrases.append(normal)
+    return tuple(phrases)
+
+
+def workdir_of(run_id: int) -> Path:
+    return settings.RUNS_DIR / str(run_id) / "work"
+
+
+def read_program_file(path, workdir: Path) -> bytes:
+    """The bytes of a file in the run's folder, named as the program sees it: relative to its
+    folder, or absolute under /home/robot (its folder in the sandbox) or under the folder's
+    real path (a run without the sandbox). Nothing outside the folder is read, not even
+    through a symbolic link."""
+    if not isinstance(path, str) or not path or "\0" in path:
+        raise ValueError("wav must be the name of a file in the program's folder")
+    named = PurePosixPath(path)
+    if named.is_absolute():
+        for seen_as in (InForce.HOME, workdir):
+            if named.is_relative_to(seen_as):
+                named = named.relative_to(seen_as)
+                break
+        else:
+            raise ValueError(f"wav must be a file in the program's folder ({InForce.HOME}): {path}")
+    root = workdir.resolve()
+    outside = ValueError(f"wav must be a file in the program's folder: {path}")
+    try:
+        target = (root / named).resolve(strict=True)
+    except (OSError, RuntimeError):
+        raise ValueError(f"no file {path} in the program's folder") from None
+    if not target.is_relative_to(root):
+        raise outside
+    try:
+        fd = os.open(target, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except OSError as exc:
+        raise ValueError(f"cannot read {path}: {exc.strerror}") from None
+    try:
+        # What was opened, whatever was swapped in meanwhile: still inside, a plain file.
+        if not Path(os.readlink(f"/proc/self/fd/{fd}")).is_relative_to(root):
+            raise outside
+        status = os.fstat(fd)
+        if not stat.S_ISREG(status.st_mode):
+            raise ValueError(f"{path} is not a file")
+        if status.st_size > MAX_AUDIO_BYTES:
+            raise ValueError(f"{path} is larger than {MAX_AUDIO_BYTES // 2**20} MB")
+        with os.fdopen(fd, "rb", closefd=False) as file:
+            return file.read(MAX_AUDIO_BYTES + 1)
+    finally:
+        os.close(fd)
+
+
+async def audio_to_pcm(data: bytes) -> bytes:
+    """A recording as the recogniser hears it: 16 kHz, mono, 16-bit little-endian samples.
+
+    PCM WAV files are read with the standard library; anything else ffmpeg can read (another
+    kind of WAV, MP3, Ogg...) goes through ffmpeg when it is installed.
+    """
+    try:
+        samples, rate = await asyncio.to_thread(_read_wav, data)
+    except (wave.Error, EOFError) as exc:
+        ffmpeg = shutil.which("ffmpeg")
+        if ffmpeg is None:
+            raise ValueError(
+                f"wav is not a PCM WAV file ({exc}); ffmpeg, which reads other kinds, is not"
+                " installed"
+            ) from None
+        return await _ffmpeg_pcm(ffmpeg, data)
+    if len(samples) > MAX_AUDIO_SECONDS * rate:
+        raise ValueError(f"wav is longer than {MAX_AUDIO_SECONDS:g} s")
+    return await asyncio.to_thread(_resample, samples, rate)
+
+
+def _read_wav(data: bytes):
+    """(mono samples as floats, sample rate) of a PCM WAV file."""
+    import numpy as np
+
+    with wave.open(io.BytesIO(data)) as recording:
+        width, channels = recording.getsampwidth(), recording.getnchannels()
+        rate = recording.getframerate()
+        frames = recording.readframes(recording.getnframes())
+    if width == 1:  # 8-bit WAV is unsigned
+        samples = np.frombuffer(frames, np.uint8).astype(np.float64) - 128.0
+        samples *= 256.0
+    elif width == 3:
+        raw = np.frombuffer(frames, np.uint8).reshape(-1, 3)
+        samples = raw[:, 0] | raw[:, 1].astype(np.int32) << 8 | raw[:, 2].astype(np.int32) << 16
+        samples = np.where(samples >= 1 << 23, samples - (1 << 24), samples) / 256.0
+    elif width in (2, 4):
+        samples = np.frombuffer(frames, f"<i{width}").astype(np.float64)
+        samples /= 1 << (8 * (width - 2))
+    else:
+        raise wave.Error(f"{8 * width}-bit samples")
+    samples = samples[: len(samples) // channels * channels].reshape(-1, channels).mean(axis=1)
+    return samples, rate
+
+
+def _resample(samples, rate: int) -> bytes:
+    """To 16 kHz by Fourier interpolation: band-limited, so nothing above 8 kHz folds back
+    into what the recogniser hears."""
+    import numpy as np
+
+    if rate != SAMPLE_RATE and len(samples):
+        count = max(1, round(len(samples) * SAMPLE_RATE / rate))
+        spectrum = np.fft.rfft(samples)
+        bins = count // 2 + 1
+        if len(spectrum) >= bins:
+            spectrum = spectrum[:bins]
+        else:
+            spectrum = np.pad(spectrum, (0, bins - len(spectrum)))
+        samples = np.fft.irfft(spectrum, count) * (count / len(samples))
+    return np.clip(np.round(samples), -32768, 32767).astype("<i2").tobytes()
+
+
+async def _ffmpeg_pcm(ffmpeg: str, data: bytes) -> bytes:
+    process = await asyncio.create_subprocess_exec(
+        ffmpeg, "-nostdin", "-loglevel", "error", "-i", "pipe:0", "-t", str(MAX_AUDIO_SECONDS),
+        "-ac", "1", "-ar", str(SAMPLE_RATE), "-f", "s16le", "pipe:1",
+        stdin=asyncio.subprocess.PIPE,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+    )  # fmt: skip
+    try:
+        out, err = await asyncio.wait_for(process.communicate(data), 60)
+    finally:
+        if process.returncode is None:
+            process.kill()
+            await process.wait()
+    if process.returncode != 0:
+        message = err.decode(errors="replace").strip().splitlines()
+        raise ValueError(
+            f"wav is not a recording ffmpeg can read: {message[-1] if message else ''}"
+        )
+    return out
+
+
+async def record(seconds: float, device) -> bytes:
+    """``seconds`` of 16 kHz mono sound from the microphone: through sounddevice (PortAudio)
+    if it is installed, else arecord (alsa-utils)."""
+    try:
+        import sounddevice
+    except (ImportError, OSError):  # OSError: installed, but PortAudio is not
+        sounddevice = None
+    if sounddevice is not None:
+        return await asyncio.to_thread(_record_sounddevice, sounddevice, seconds, device)
+    arecord = shutil.which("arecord")
+    if arecord is None:
+        raise RpcError(
+            ROBOT_ERROR,
+            "listen() hears the microphone through sounddevice (with PortAudio) or arecord"
+            " (alsa-utils), and neither is installed on this computer"
+            + _no_sound_card()
+            + ": give it a recording instead, listen(wav=FILE)",
+        )
+    argv = [arecord, "-q", "-t", "raw", "-f", "S16_LE", "-r", str(SAMPLE_RATE), "-c", "1"]
+    argv += ["-d", str(math.ceil(seconds))]
+    if device is not None:
+        argv += ["-D", str(device)]
+    process = await asyncio.create_subprocess_exec(
+        *argv, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE
+    )
+    try:
+        out, err = await asyncio.wait_for(process.communicate(), seconds + 10)
+    except TimeoutError:
+        raise RpcError(ROBOT_ERROR, "the microphone gave no sound (arecord hung)") from None
+    finally:
+        if process.returncode is None:
+            process.kill()
+            await process.wait()
+    if process.returncode != 0:
+        why = err.decode(errors="replace").strip() or f"status {process.returncode}"
+        raise RpcError(ROBOT_ERROR, f"cannot record from the microphone: {why}{_no_sound_card()}")
+    return out[: int(seconds * SAMPLE_RATE) * 2]
+
+
+def _record_sounddevice(sounddevice, seconds: float, device) -> bytes:
+    try:
+        frames = sounddevice.rec(
+            int(seconds * SAMPLE_RATE), samplerate=SAMPLE_RATE, channels=1, dtype="int16",
+            device=device,
+        )  # fmt: skip
+        sounddevice.wait()
+    except (sounddevice.PortAudioError, ValueError) as exc:
+        raise RpcError(
+            ROBOT_ERROR, f"cannot record from the microphone: {exc}{_no_sound_card()}"
+        ) from None
+    return frames.tobytes()
+
+
+def _no_sound_card() -> str:
+    return "" if Path("/dev/snd").exists() else " (this computer has no sound card)"
+
+
+class Recogniser:
+    """pocketsphinx with its bundled en-us model, loaded once and shared: one utterance at a
+    time. Recognition is batch (cepstral mean over the whole utterance), so what it hears does
+    not depend on what it heard before."""
+
+    MAX_GRAMMARS = 32
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._decoder = None
+        self._grammars: dict[tuple[str, ...], str] = {}  # phrases -> search name, oldest first
+        self._names = itertools.count()
+
+    def _load(self):
+        if self._decoder is None:
+            from pocketsphinx import Decoder
+
+            self._decoder = Decoder(samprate=SAMPLE_RATE, loglevel="FATAL")
+        return self._decoder
+
+    def check(self, phrases: tuple[str, ...]) -> None:
+        """ValueError naming a word the model's dictionary lacks."""
+        with self._lock:
+            decoder = self._load()
+            for phrase in phrases:
+                for word in phrase.split():
+                    if decoder.lookup_word(word) is None:
+                        raise ValueError(f"listen() does not know the word {word!r}")
+
+    def recognise(self, pcm: bytes, phrases: tuple[str, ...]) -> dict:
+        """{"text": what was said, "words": its words}; with ``phrases``, the text is the one
+        of them heard, or "" when none was."""
+        with self._lock:
+            decoder = self._load()
+            decoder.activate_search(self._grammar(decoder, phrases) if phrases else "_default")
+            decoder.start_utt()
+            if pcm:
+                decoder.process_raw(pcm, full_utt=True)
+            decoder.end_utt()
+            hypothesis = decoder.hyp()
+            text = " ".join(hypothesis.hypstr.split()) if hypothesis else ""
+            words = [
+                re.sub(r"\(\d+\)$", "", segment.word)  # "the(2)": a second pronunciation
+                for segment in decoder.seg() or ()
+                if not segment.word.startswith(("<", "["))  # silence, noise
+            ]
+        if phrases and text not in phrases:  # it got part of the way into one: no command
+            return {"text": "", "words": []}
+        return {"text": text, "words": words}
+
+    def _grammar(self, decoder, phrases: tuple[str, ...]) -> str:
+        name = self._grammars.pop(phrases, None)
+        if name is None:
+            name = f"words{next(self._names)}"
+            grammar = f"#JSGF V1.0;\ngrammar words;\npublic <words> = {' | '.join(phrases)};\n"
+            decoder.add_jsgf_string(name, grammar)
+            if len(self._grammars) >= self.MAX_GRAMMARS:
+                decoder.activate_search("_default")  # never remove the search in use
+                decoder.remove_search(self._grammars.pop(next(iter(self._grammars))))
+        self._grammars[phrases] = name  # the most recently used last
+        return name
+
+
+RECOGNISER = Recogniser()
