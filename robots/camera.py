@@ -155,21 +155,25 @@ class CameraHub:
         task.add_done_callback(self._snapshots.discard)
 
     async def _snapshot(self, message: dict) -> None:
-        if self.latest is not None:
-            await self.agent.reply(message, {"jpeg": self.latest})
-            return
         try:
-            async with self._snapshot_lock:
-                source = open_source(self.agent, await self.settings())
-                try:
-                    await source.start()
-                    jpeg = await source.frame()
-                finally:
-                    await source.close()
+            jpeg = await self.frame()
         except Exception as exc:  # told to whoever asked; the agent carries on
             await self.agent.reply(message, {"error": f"robot {self.agent.name}: {exc}"})
             return
         await self.agent.reply(message, {"jpeg": jpeg})
+
+    async def frame(self) -> bytes:
+        """The newest frame sent if the camera is on, else one taken now (one at a time: one
+        device, one ffmpeg)."""
+        if self.latest is not None:
+            return self.latest
+        async with self._snapshot_lock:
+            source = open_source(self.agent, await self.settings())
+            try:
+                await source.start()
+                return await source.frame()
+            finally:
+                await source.close()
 
     async def settings(self) -> CameraSettings:
         robot = await database_sync_to_async(Robot.objects.get)(name=self.agent.name)

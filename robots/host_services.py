@@ -45,7 +45,6 @@ from django.conf import settings
 
 import rhal
 from programs.isolation import InForce
-from rhal.camera import FfmpegCamera
 from robots.models import Robot
 from robots.rpc import ROBOT_ERROR, RpcError, bind_params
 
@@ -72,7 +71,6 @@ class HostServices:
         self.agent = agent
         self._speaking = asyncio.Lock()
         self._waiting = 0
-        self._camera_lock = asyncio.Lock()
         self.methods = {
             "say": self.say,
             "snapshot": self.snapshot,
@@ -172,15 +170,7 @@ class HostServices:
             raise RpcError(ROBOT_ERROR, f"the robot's camera setting is wrong: {exc}") from None
         if not camera.device:
             return None
-        if isinstance(hub.source, FfmpegCamera) and hub.latest is not None:
-            return hub.latest
-        async with getattr(hub, "_snapshot_lock", self._camera_lock):
-            source = FfmpegCamera(camera)
-            try:
-                await source.start()
-                return await source.frame()
-            finally:
-                await source.close()
+        return await hub.frame()
 
 
 # -- speaking -------------------------------------------------------------------------------
