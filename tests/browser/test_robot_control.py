@@ -114,3 +114,21 @@ def test_a_command_button_runs_its_program_with_its_arguments(page, appliance, s
     screenshot(page, "robot-button-pressed")
     outcome.get_by_role("link").click()
     expect(page.locator("#log-lines")).to_contain_text("asked to dock bay two")
+
+
+FAKE_GAMEPAD = """
+window.__pad = { connected: true, axes: [0, 0], buttons: [] };
+navigator.getGamepads = () => [window.__pad];
+"""
+
+
+def test_a_gamepad_stick_drives_and_centring_it_stops(page, appliance):
+    page.add_init_script(FAKE_GAMEPAD)  # Chromium headless has no gamepad: the API's shape
+    page.goto("/robots/sim/")
+    page.wait_for_function("() => document.querySelector('#robot-status.connected')")
+    page.evaluate("window.dispatchEvent(new Event('gamepadconnected'))")
+    page.evaluate("window.__pad.axes = [0, -1]")  # stick pushed forward
+    expect(reading(page, "velocity.linear")).to_have_attribute("data-value", re.compile(r"^0\.2"))
+    page.evaluate("window.__pad.axes = [-0.05, 0.1]")  # back in the dead zone
+    expect(reading(page, "velocity.linear")).to_have_attribute("data-value", "0.0")
+    page.get_by_role("button", name="Release control").click()
