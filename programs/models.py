@@ -20,6 +20,8 @@ class Program(models.Model):
     source = models.TextField(blank=True)
     created = models.DateTimeField(default=timezone.now)
     updated = models.DateTimeField(default=timezone.now)
+    #: Where it came from, when not written here: "copied from …", "pushed from …", "imported".
+    origin = models.CharField(max_length=300, blank=True)
 
     class Meta:
         ordering = ["name"]
@@ -245,3 +247,59 @@ class RunRefused(Exception):
 
 class AgentUnreachable(Exception):
     pass
+
+
+class Share(models.Model):
+    """A program shared with one user, one group (a class), or everyone (the gallery)."""
+
+    program = models.ForeignKey(Program, on_delete=models.CASCADE, related_name="shares")
+    user = models.ForeignKey(
+        settings.AUTH_USER_MODEL,
+        null=True,
+        blank=True,
+        on_delete=models.CASCADE,
+        related_name="shared_with_me",
+    )
+    group = models.ForeignKey(
+        "auth.Group", null=True, blank=True, on_delete=models.CASCADE, related_name="shares"
+    )
+    everyone = models.BooleanField(default=False)
+    can_edit = models.BooleanField(default=False)
+    created_by = models.ForeignKey(
+        settings.AUTH_USER_MODEL, null=True, on_delete=models.SET_NULL, related_name="+"
+    )
+    created = models.DateTimeField(default=timezone.now)
+
+    class Meta:
+        ordering = ["created"]
+        constraints = [
+            models.CheckConstraint(
+                name="share_has_one_target",
+                condition=(
+                    models.Q(user__isnull=False, group__isnull=True, everyone=False)
+                    | models.Q(user__isnull=True, group__isnull=False, everyone=False)
+                    | models.Q(user__isnull=True, group__isnull=True, everyone=True)
+                ),
+            ),
+            models.UniqueConstraint(
+                fields=["program", "user"], condition=models.Q(user__isnull=False),
+                name="one_share_per_user",
+            ),
+            models.UniqueConstraint(
+                fields=["program", "group"], condition=models.Q(group__isnull=False),
+                name="one_share_per_group",
+            ),
+            models.UniqueConstraint(
+                fields=["program"], condition=models.Q(everyone=True),
+                name="one_share_with_everyone",
+            ),
+        ]  # fmt: skip
+
+    def __str__(self) -> str:
+        return f"{self.program} -> {self.target}"
+
+    @property
+    def target(self) -> str:
+        if self.everyone:
+            return "everyone"
+        return f"group {self.group.name}" if self.group_id else f"user {self.user.username}"

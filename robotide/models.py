@@ -41,3 +41,18 @@ class ApiToken(models.Model):
         if found.last_used is None or now - found.last_used > LAST_USED_RESOLUTION:
             cls.objects.filter(pk=found.pk).update(last_used=now)  # not a write per request
         return found.user
+
+
+class ClassTeacher(models.Model):
+    """A teacher of a class: a group whose members' programs and runs they see and run."""
+
+    group = models.ForeignKey("auth.Group", on_delete=models.CASCADE, related_name="teachers")
+    user = models.ForeignKey(
+        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="teaching"
+    )
+
+    class Meta:
+        constraints = [models.UniqueConstraint(fields=["group", "user"], name="one_teacher_row")]
+
+    def __str__(self) -> str:
+        return f"{self.user} teaches {self.group}"

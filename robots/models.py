@@ -23,6 +23,12 @@ class Robot(models.Model):
     isolation = models.CharField(
         max_length=200, blank=True, editable=False, help_text="What its agent gives each run"
     )
+    groups = models.ManyToManyField(
+        "auth.Group",
+        blank=True,
+        related_name="robots",
+        help_text="Only these classes (and their teachers) may use it; none: everyone",
+    )
     owner = models.ForeignKey(
         django_settings.AUTH_USER_MODEL,
         null=True,
