@@ -1,32 +1,77 @@
 """The one place that decides who may see and use a program or a run.
 
-Views, API endpoints and consumers fetch objects only through these helpers.
+Views, API endpoints and consumers fetch objects only through these helpers, so pages, the API
+and websockets answer alike, and an unshared program is gone from all of them at once.
+
+Who sees what:
+- a program: its owner; whoever it is shared with (a user, a class they belong to, everyone);
+  the teachers of a class its owner belongs to; admins (superusers);
+- to edit it: its owner, whoever a share says may edit it, admins;
+- to delete, rename or share it: its owner and admins;
+- a run: who started it, the teachers of that person's classes, admins.
 """
 
+from django.core.exceptions import PermissionDenied
+from django.db.models import Q, QuerySet
 from django.http import Http404
 
 from programs.models import Program, Run
 
+READ, EDIT, OWN = "read", "edit", "own"
 
-def programs_for_user(user):
+
+def taught_groups(user) -> QuerySet:
+    from django.contrib.auth.models import Group
+
+    return Group.objects.filter(teachers__user=user)
+
+
+def programs_for_user(user, level: str = READ) -> QuerySet:
+    """The programs ``user`` may see (``READ``), change (``EDIT``) or own (``OWN``)."""
     if not user.is_authenticated:
         return Program.objects.none()
     qs = Program.objects.select_related("owner")
-    return qs if user.is_staff else qs.filter(owner=user)
+    if user.is_superuser:
+        return qs
+    if level == OWN:
+        return qs.filter(owner=user)
+    groups = user.groups.all()
+    if level == EDIT:
+        shared = (
+            Q(shares__user=user, shares__can_edit=True)
+            | Q(shares__group__in=groups, shares__can_edit=True)
+            | Q(shares__everyone=True, shares__can_edit=True)
+        )
+        return qs.filter(Q(owner=user) | shared).distinct()
+    shared = Q(shares__user=user) | Q(shares__group__in=groups) | Q(shares__everyone=True)
+    taught = Q(owner__groups__in=taught_groups(user))
+    return qs.filter(Q(owner=user) | shared | taught).distinct()
 
 
-def runs_for_user(user):
+def runs_for_user(user) -> QuerySet:
     if not user.is_authenticated:
         return Run.objects.none()
     qs = Run.objects.select_related("robot", "owner")
-    return qs if user.is_staff else qs.filter(owner=user)
+    if user.is_superuser:
+        return qs
+    return qs.filter(Q(owner=user) | Q(owner__groups__in=taught_groups(user))).distinct()
 
 
-def get_program_for_user(user, pk) -> Program:
+def get_program_for_user(user, pk, level: str = READ) -> Program:
+    """The program: 404 if ``user`` may not see it, 403 if they see it but may not do
+    ``level`` to it (a read-only share, a teacher's view of a student's program)."""
     try:
-        return programs_for_user(user).get(pk=pk)
+        program = programs_for_user(user).get(pk=pk)
     except (Program.DoesNotExist, ValueError, TypeError):
         raise Http404("No such program.") from None
+    if level != READ and not can(user, level, program):
+        doing = "change" if level == EDIT else "delete or share"
+        raise PermissionDenied(f"You may read this program but not {doing} it.")
+    return program
+
+
+def can(user, level: str, program: Program) -> bool:
+    return programs_for_user(user, level).filter(pk=program.pk).exists()
 
 
 def get_run_for_user(user, pk) -> Run:

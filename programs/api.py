@@ -4,11 +4,21 @@ from typing import Literal
 from django.db import IntegrityError
 from django.db.models import Count
 from django.http import HttpResponse, StreamingHttpResponse
-from ninja import Field, Router, Schema
+from django.utils.http import content_disposition_header
+from ninja import Field, File, Form, Router, Schema, UploadedFile
+from ninja.errors import HttpError
 from ninja.responses import Status
 from pydantic import field_validator, model_validator
 
-from programs.access import get_program_for_user, get_run_for_user, programs_for_user, runs_for_user
+from programs import archive, outbound
+from programs.access import (
+    EDIT,
+    OWN,
+    get_program_for_user,
+    get_run_for_user,
+    programs_for_user,
+    runs_for_user,
+)
 from programs.languages import LANGUAGES, get_language
 from programs.models import MAX_SOURCE_BYTES, Program, Run, request_stop, start_run
 from programs.runlog import plain_text
@@ -26,6 +36,16 @@ class ProgramIn(Schema):
     name: str = Field(min_length=1, max_length=100)
     language: str = Field(json_schema_extra=LANGUAGE_ENUM)
     source: str = ""
+    origin: str = Field(
+        "",
+        description="where it came from, e.g. pushed from http://other:8000 by alice"
+        " (one line, the first 300 characters kept)",
+    )
+
+    @field_validator("origin")
+    @classmethod
+    def one_line_origin(cls, value):
+        return outbound.one_line(value) if value is not None else value
 
     @field_validator("language")
     @classmethod
@@ -76,6 +96,7 @@ class ProgramOut(Schema):
     created: datetime
     updated: datetime
     revisions: int = Field(alias="revision_count")
+    origin: str = ""
 
 
 class RunIn(Schema):
@@ -115,7 +136,9 @@ def list_programs(request):
 @programs_router.post("", response={201: ProgramOut, 409: Error})
 def create_program(request, data: ProgramIn):
     try:
-        program = Program.objects.create(owner=request.user, name=data.name, language=data.language)
+        program = Program.objects.create(
+            owner=request.user, name=data.name, language=data.language, origin=data.origin
+        )
     except IntegrityError:
         return Status(409, {"detail": f"You already have a program named {data.name!r}."})
     program.save_source(data.source, request.user)
@@ -129,7 +152,7 @@ def get_program(request, program_id: int):
 
 @programs_router.put("/{int:program_id}", response={200: ProgramOut, 409: Error})
 def update_program(request, program_id: int, data: ProgramUpdate):
-    program = get_program_for_user(request.user, program_id)
+    program = get_program_for_user(request.user, program_id, EDIT)
     if data.name is not None:
         program.name = data.name
     if data.language is not None:
@@ -143,7 +166,7 @@ def update_program(request, program_id: int, data: ProgramUpdate):
 
 @programs_router.delete("/{int:program_id}", response={204: None})
 def delete_program(request, program_id: int):
-    get_program_for_user(request.user, program_id).delete()
+    get_program_for_user(request.user, program_id, OWN).delete()
     return Status(204, None)
 
 
@@ -154,6 +177,71 @@ def run_program(request, program_id: int, data: RunIn):
     return Status(201, start_run(program, robot, request.user, data.args))
 
 
+class ImportedOut(Schema):
+    id: int
+    name: str
+    file: str
+
+
+class SkippedOut(Schema):
+    file: str
+    why: str
+
+
+class ImportReportOut(Schema):
+    created: list[ImportedOut]
+    updated: list[ImportedOut]
+    skipped: list[SkippedOut]
+
+
+ZIP_RESPONSE = {
+    "description": "The caller's own programs: one plain file each and manifest.json",
+    "content": {"application/zip": {"schema": {"type": "string", "format": "binary"}}},
+}
+ARCHIVE_STATUS = {archive.NotAZip: 400, archive.ArchiveTooLarge: 413, archive.BadArchive: 422}
+
+
+def _error_response(why: str, detail: dict) -> dict:
+    schema = {"type": "object", "properties": {"detail": detail}, "required": ["detail"]}
+    return {"description": why, "content": {"application/json": {"schema": schema}}}
+
+
+# With string keys, as robotide.api adds the common errors: declared in response= too (int
+# keys), each status would be in the schema's JSON twice.
+IMPORT_RESPONSES = {
+    "400": _error_response("Not a zip, or a damaged one", {"type": "string"}),
+    "413": _error_response("Too many files or bytes", {"type": "string"}),
+    "422": _error_response(
+        "Unsafe or nested paths, a manifest not robotide's, or no file",
+        {"anyOf": [{"type": "string"}, {"type": "array"}]},
+    ),
+}
+
+
+@programs_router.get("/export", openapi_extra={"responses": {200: ZIP_RESPONSE}})
+def export_programs(request):
+    # Only the caller's own: staff see everyone's programs, but an export is one person's.
+    data = archive.export_zip(Program.objects.filter(owner=request.user))
+    response = HttpResponse(data, content_type="application/zip")
+    filename = archive.export_filename(request.user)
+    response["Content-Disposition"] = content_disposition_header(True, filename)
+    return response
+
+
+@programs_router.post(
+    "/import", response=ImportReportOut, openapi_extra={"responses": IMPORT_RESPONSES}
+)
+def import_programs(request, file: File[UploadedFile], replace: Form[bool] = False):
+    """A zip as made by export (or any zip of program files) becomes the caller's programs."""
+    try:
+        report = archive.import_zip(
+            file.read(), request.user, filename=file.name or "a zip", replace=replace
+        )
+    except archive.ArchiveError as exc:
+        raise HttpError(ARCHIVE_STATUS[type(exc)], str(exc)) from None
+    return report.as_dict()
+
+
 @programs_router.get("/languages", response=list[dict], auth=None)
 def list_languages(request):
     return [
@@ -161,6 +249,65 @@ def list_languages(request):
          "available": lang.available, "install": lang.install_hint}
         for lang in LANGUAGES.values()
     ]  # fmt: skip
+
+
+class EmailIn(Schema):
+    to: str = Field(min_length=1, max_length=320, description="one e-mail address")
+
+
+class EmailOut(Schema):
+    to: str
+    attachment: str = Field(description="the attached file's name")
+
+
+class PushIn(Schema):
+    url: str = Field(
+        min_length=1,
+        max_length=outbound.MAX_URL,
+        description="the other robotide, http(s)://HOST:PORT",
+    )
+    token: str = Field(
+        min_length=1,
+        max_length=outbound.MAX_TOKEN,
+        description="an API token of the account there that gets the program",
+    )
+
+
+class PushOut(Schema):
+    url: str
+    id: int | None = Field(description="the program's id there")
+    name: str = Field(description='its name there: " (2)" added if the account had it already')
+    owner: str
+
+
+@programs_router.post(
+    "/{int:program_id}/email",
+    response={200: EmailOut, 429: Error, 502: Error, 503: Error},
+)
+def email_program(request, program_id: int, data: EmailIn):
+    """Mail the program, its source attached, to one address (each user has
+    ROBOTIDE_EMAIL_PER_HOUR mails an hour; 0 is 403, sending by e-mail turned off)."""
+    program = get_program_for_user(request.user, program_id)
+    site = outbound.site_of(request)
+    try:
+        to = outbound.email_program(program, data.to, user=request.user, site=site)
+    except outbound.OutboundError as exc:
+        raise HttpError(exc.status, str(exc)) from exc
+    return {"to": to, "attachment": program.filename}
+
+
+@programs_router.post(
+    "/{int:program_id}/push", response={200: PushOut, 429: Error, 502: Error, 504: Error}
+)
+def push_program(request, program_id: int, data: PushIn):
+    """Push the program to another robotide: it arrives there as a program of the token's
+    account, its origin saying where it came from."""
+    program = get_program_for_user(request.user, program_id)
+    site = outbound.site_of(request)
+    try:
+        return outbound.push_program(program, data.url, data.token, user=request.user, site=site)
+    except outbound.OutboundError as exc:
+        raise HttpError(exc.status, str(exc)) from exc
 
 
 @runs_router.get("", response=list[RunOut])

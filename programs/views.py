@@ -3,13 +3,22 @@ import json
 
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
-from django.core.exceptions import ValidationError
+from django.core.exceptions import PermissionDenied, ValidationError
 from django.http import HttpRequest, HttpResponse, StreamingHttpResponse
 from django.shortcuts import get_object_or_404, redirect, render
-from django.utils.http import url_has_allowed_host_and_scheme
+from django.utils.http import content_disposition_header, url_has_allowed_host_and_scheme
 from django.views.decorators.http import require_POST
 
-from programs.access import get_program_for_user, get_run_for_user, programs_for_user, runs_for_user
+from programs import archive, outbound
+from programs.access import (
+    EDIT,
+    OWN,
+    can,
+    get_program_for_user,
+    get_run_for_user,
+    programs_for_user,
+    runs_for_user,
+)
 from programs.forms import EditProgramForm, NewProgramForm, UploadForm, unique_name
 from programs.languages import (
     availability,
@@ -19,6 +28,7 @@ from programs.languages import (
 )
 from programs.models import AgentUnreachable, Program, Run, RunRefused, request_stop, start_run
 from programs.runlog import plain_text, render_lines, tail
+from programs.shares import ShareError, add_share
 from robots.models import get_robot_for_user, robots_for_user
 
 
@@ -97,8 +107,43 @@ def _render_editor(request, program, form, status=200):
         "robots": robots_for_user(request.user),
         "runs": runs_for_user(request.user).filter(program=program)[:10],
         "revision": program.revisions.first(),
+        "can_edit": can(request.user, EDIT, program),
+        "is_owner": can(request.user, OWN, program),
+        "shares": program.shares.select_related("user", "group"),
     }
     return render(request, "programs/edit.html", context, status=status)
+
+
+@login_required
+@require_POST
+def program_share(request: HttpRequest, program_id: int) -> HttpResponse:
+    """The owner shares the program with a user, a class or everyone."""
+    program = get_program_for_user(request.user, program_id, OWN)
+    target = request.POST.get("target", "").strip()
+    kind, _, name = target.partition(":") if ":" in target else ("user", "", target)
+    if target == "everyone":
+        kind = "everyone"
+    try:
+        share = add_share(
+            program, request.user, user=name.strip() if kind == "user" else "",
+            group=name.strip() if kind == "group" else "", everyone=kind == "everyone",
+            can_edit=request.POST.get("can_edit") == "on",
+        )  # fmt: skip
+    except ShareError as exc:
+        messages.error(request, f"Not shared: {exc}.")
+    else:
+        messages.success(request, f"Shared with {share.target}.")
+    return redirect("program-edit", program.pk)
+
+
+@login_required
+@require_POST
+def program_unshare(request: HttpRequest, program_id: int, share_id: int) -> HttpResponse:
+    program = get_program_for_user(request.user, program_id, OWN)
+    share = get_object_or_404(program.shares, pk=share_id)
+    share.delete()
+    messages.success(request, f"No longer shared with {share.target}.")
+    return redirect("program-edit", program.pk)
 
 
 def _save_and_act(request, program: Program, form: EditProgramForm) -> HttpResponse:
@@ -106,6 +151,10 @@ def _save_and_act(request, program: Program, form: EditProgramForm) -> HttpRespo
     action = request.POST.get("action", "save")
     if action == "save_as":
         return _save_copy(request, program, form)
+    if not can(request.user, EDIT, program):
+        if action == "run":  # a read-only program runs as it is
+            return _start(request, program, request.POST.get("robot", ""))
+        raise PermissionDenied("This program is shared with you read-only: save a copy.")
     program.language = data["language"]
     revision = program.save_source(data["source"], request.user)
     if action == "run":
@@ -156,8 +205,41 @@ def program_download(request: HttpRequest, program_id: int) -> HttpResponse:
 
 
 @login_required
+def program_export(request: HttpRequest) -> HttpResponse:
+    """All of the user's own programs as a zip (what staff may see of others' is not theirs)."""
+    data = archive.export_zip(Program.objects.filter(owner=request.user))
+    response = HttpResponse(data, content_type="application/zip")
+    filename = archive.export_filename(request.user)
+    response["Content-Disposition"] = content_disposition_header(True, filename)
+    return response
+
+
+@login_required
+@require_POST
+def program_import(request: HttpRequest) -> HttpResponse:
+    upload = request.FILES.get("file")
+    if upload is None:
+        messages.error(request, "Choose a zip file to import.")
+        return redirect("program-list")
+    replace = request.POST.get("replace", "") in ("true", "on", "1")
+    try:
+        report = archive.import_zip(
+            upload.read(), request.user, filename=upload.name, replace=replace
+        )
+    except archive.ArchiveError as exc:
+        messages.error(request, f"Nothing was imported from {upload.name}: {exc}")
+        return redirect("program-list")
+    messages.success(request, f"Imported {upload.name}: {report.summary()}.")
+    if report.skipped:
+        shown = "; ".join(f"{s.file} ({s.why})" for s in report.skipped[:10])
+        more = f" and {len(report.skipped) - 10} more" if len(report.skipped) > 10 else ""
+        messages.warning(request, f"Skipped {shown}{more}.")
+    return redirect("program-list")
+
+
+@login_required
 def program_delete(request: HttpRequest, program_id: int) -> HttpResponse:
-    program = get_program_for_user(request.user, program_id)
+    program = get_program_for_user(request.user, program_id, OWN)
     if request.method == "POST":
         name = program.name
         program.delete()
@@ -181,6 +263,7 @@ def revision_detail(request: HttpRequest, program_id: int, number: int) -> HttpR
     program = get_program_for_user(request.user, program_id)
     revision = get_object_or_404(program.revisions, number=number)
     if request.method == "POST":
+        get_program_for_user(request.user, program_id, EDIT)
         restored = program.save_source(revision.source, request.user)
         messages.success(request, f"Restored revision {number} as revision {restored.number}.")
         return redirect("program-edit", program.pk)
@@ -203,6 +286,44 @@ def _diff_line(line: str) -> tuple[str, str]:
         return "file", line
     kind = {"+": "add", "-": "del", "@": "hunk"}.get(line[:1], "same")
     return kind, line
+
+
+@login_required
+@require_POST
+def program_email(request: HttpRequest, program_id: int) -> HttpResponse:
+    program = get_program_for_user(request.user, program_id)
+    try:
+        to = outbound.email_program(
+            program, request.POST.get("to", ""), user=request.user, site=outbound.site_of(request)
+        )
+    except outbound.OutboundError as exc:
+        messages.error(request, str(exc))
+    else:
+        messages.success(request, f"Sent {program.name} to {to}.")
+    return redirect("program-edit", program.pk)
+
+
+@login_required
+@require_POST
+def program_push(request: HttpRequest, program_id: int) -> HttpResponse:
+    program = get_program_for_user(request.user, program_id)
+    try:
+        arrived = outbound.push_program(
+            program,
+            request.POST.get("url", ""),
+            request.POST.get("token", ""),
+            user=request.user,
+            site=outbound.site_of(request),
+        )
+    except outbound.OutboundError as exc:
+        messages.error(request, str(exc))
+    else:
+        messages.success(
+            request,
+            f"Pushed {program.name} to {arrived['url']}: it is {arrived['name']!r}"
+            f" of {arrived['owner'] or 'the account'} there.",
+        )
+    return redirect("program-edit", program.pk)
 
 
 # -- runs ---------------------------------------------------------------------------------

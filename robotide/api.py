@@ -3,6 +3,7 @@
 Authenticated by the session (with CSRF) or ``Authorization: Bearer <token>``.
 """
 
+from django.core.exceptions import PermissionDenied
 from django.http import Http404, JsonResponse
 from django.views import defaults
 from ninja import NinjaAPI
@@ -11,6 +12,7 @@ from ninja.security import HttpBearer, django_auth
 
 from programs.api import programs_router, runs_router
 from programs.models import AgentUnreachable, RunRefused
+from programs.shares_api import groups_router, shares_router
 from robotide.models import ApiToken
 from robots.api import robots_router
 from robots.bus import AgentUnavailable
@@ -64,6 +66,9 @@ class RobotideAPI(NinjaAPI):
                 if "requestBody" in operation:
                     statuses.update((400, 413))
                 responses = operation["responses"]
+                # ninja keys its own statuses by number: one key per status, whatever its type.
+                for key in [k for k in responses if isinstance(k, int)]:
+                    responses[str(key)] = responses.pop(key)
                 for status in sorted(statuses):
                     body = VALIDATION_ERROR if status == 422 else ERROR
                     responses.setdefault(
@@ -86,11 +91,18 @@ api = RobotideAPI(
 api.add_router("/programs", programs_router)
 api.add_router("/runs", runs_router)
 api.add_router("/robots", robots_router)
+api.add_router("/programs", shares_router)
+api.add_router("/groups", groups_router)
 
 
 @api.exception_handler(Http404)
 def not_found(request, exc):
     return api.create_response(request, {"detail": str(exc) or "Not found."}, status=404)
+
+
+@api.exception_handler(PermissionDenied)
+def forbidden(request, exc):
+    return api.create_response(request, {"detail": str(exc) or "Not allowed."}, status=403)
 
 
 @api.exception_handler(AuthenticationError)

@@ -5,6 +5,14 @@ robotide up [--bind HOST:PORT]   migrate, set up, serve (web + agents in one pro
 robotide agent NAME              run one robot's agent (fleet mode)
 robotide token USERNAME          print a new API token for a user
 robotide robots detect [--json]  list serial ports and USB devices that look like robots
+robotide export USERNAME [-o FILE]
+                                 a user's programs as a zip of plain files and a manifest
+                                 (to standard output, unless that is a terminal)
+robotide import USERNAME FILE [--replace]
+                                 programs from such a zip (FILE - : standard input)
+robotide user add NAME [--staff] [--group G] [--password-stdin]
+                                 create an account; its password is printed once if generated
+                                 (else from standard input or ROBOTIDE_USER_PASSWORD)
 robotide manage ...              Django's manage.py commands
 """
 
@@ -43,6 +51,31 @@ def main(argv: list[str] | None = None) -> int:
     robot_commands = robots.add_subparsers(dest="robots_command", required=True)
     detect = robot_commands.add_parser("detect", help="list devices that look like robots")
     detect.add_argument("--json", action="store_true", help="print JSON lines")
+    export = commands.add_parser("export", help="a user's programs as a zip of plain files")
+    export.add_argument("username")
+    export.add_argument(
+        "-o", "--output", help="the zip to write, - for standard output (the default unless "
+        "that is a terminal: then ./robotide-USER-DATE.zip)",
+    )  # fmt: skip
+    import_ = commands.add_parser("import", help="programs from a zip, as export makes")
+    import_.add_argument("username")
+    import_.add_argument("file", help="the zip, - for standard input")
+    import_.add_argument(
+        "--replace", action="store_true",
+        help="a program of the same name gets a new revision instead of a copy",
+    )  # fmt: skip
+    user = commands.add_parser("user", help="accounts")
+    user_commands = user.add_subparsers(dest="user_command", required=True)
+    user_add = user_commands.add_parser(
+        "add", help="create an account; its password is printed once unless given"
+    )
+    user_add.add_argument("name")
+    user_add.add_argument("--staff", action="store_true", help="a teacher or administrator")
+    user_add.add_argument("--group", help="add to this group (a class), created if need be")
+    user_add.add_argument(
+        "--password-stdin", action="store_true",
+        help="read the password from standard input (or set ROBOTIDE_USER_PASSWORD)",
+    )  # fmt: skip
     commands.add_parser("manage", help="Django management commands", add_help=False)
     args, rest = parser.parse_known_args(argv)
     if args.command == "robots":
@@ -54,9 +87,15 @@ def main(argv: list[str] | None = None) -> int:
     # What the server writes is its own; run accounts get only what is opened to them.
     os.umask(0o077)
     setup_django()
-    return {"up": cmd_up, "agent": cmd_agent, "token": cmd_token, "manage": cmd_manage}[
-        args.command
-    ](args, rest)
+    return {
+        "up": cmd_up,
+        "agent": cmd_agent,
+        "token": cmd_token,
+        "export": cmd_export,
+        "import": cmd_import,
+        "user": cmd_user,
+        "manage": cmd_manage,
+    }[args.command](args, rest)
 
 
 def cmd_detect(args) -> int:
@@ -222,6 +261,120 @@ def cmd_token(args, rest) -> int:
         return 2
     _, token = ApiToken.issue(user, args.name)
     print(token)
+    return 0
+
+
+def _user_named(username: str):
+    from django.contrib.auth import get_user_model
+
+    try:
+        return get_user_model().objects.get(username=username)
+    except get_user_model().DoesNotExist:
+        print(f"robotide: no user named {username!r}", file=sys.stderr)
+        return None
+
+
+def cmd_export(args, rest) -> int:
+    from programs.archive import export_filename, export_zip
+    from programs.models import Program
+
+    user = _user_named(args.username)
+    if user is None:
+        return 2
+    programs = Program.objects.filter(owner=user)
+    data = export_zip(programs)
+    output = args.output or ("-" if not sys.stdout.isatty() else export_filename(user))
+    if output == "-":
+        try:
+            sys.stdout.buffer.write(data)
+            sys.stdout.buffer.flush()
+        except BrokenPipeError:  # the reader went away (`| head`): no traceback for that
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 1
+        output = "standard output"
+    else:
+        try:
+            with open(output, "wb") as out:
+                out.write(data)
+        except OSError as exc:
+            print(f"robotide: cannot write {output}: {exc.strerror}", file=sys.stderr)
+            return 1
+    print(f"Exported {programs.count()} programs of {user.username} to {output}", file=sys.stderr)
+    return 0
+
+
+def cmd_import(args, rest) -> int:
+    from programs.archive import MAX_TOTAL_BYTES, ArchiveError, import_zip
+
+    user = _user_named(args.username)
+    if user is None:
+        return 2
+    try:
+        if args.file == "-":
+            data = sys.stdin.buffer.read(MAX_TOTAL_BYTES + 1)
+        else:
+            with open(args.file, "rb") as zip_file:
+                data = zip_file.read(MAX_TOTAL_BYTES + 1)  # more is refused: no need to read it
+    except OSError as exc:
+        print(f"robotide: cannot read {args.file}: {exc.strerror}", file=sys.stderr)
+        return 2
+    name = "standard input" if args.file == "-" else os.path.basename(args.file)
+    try:
+        report = import_zip(data, user, filename=name, replace=args.replace)
+    except ArchiveError as exc:
+        print(f"robotide: nothing imported: {exc}", file=sys.stderr)
+        return 1
+    for line in report.lines():
+        print(line)
+    print(f"{report.summary()} for {user.username}")
+    return 0
+
+
+def cmd_user(args, rest) -> int:
+    from django.contrib.auth import get_user_model
+    from django.contrib.auth.models import Group
+    from django.contrib.auth.password_validation import validate_password
+    from django.core.exceptions import ValidationError
+    from django.db import transaction
+
+    User = get_user_model()
+    if User.objects.filter(username=args.name).exists():
+        print(f"robotide: a user named {args.name!r} exists already", file=sys.stderr)
+        return 2
+    try:
+        User._meta.get_field("username").clean(args.name, None)
+        Group._meta.get_field("name").clean(args.group or "-", None)
+    except ValidationError as exc:
+        print(f"robotide: {' '.join(exc.messages)}", file=sys.stderr)
+        return 2
+    if args.password_stdin:
+        password = sys.stdin.readline().rstrip("\r\n")
+        if not password:
+            print("robotide: no password on standard input", file=sys.stderr)
+            return 2
+    else:
+        password = os.environ.get("ROBOTIDE_USER_PASSWORD") or None
+    generated = secrets.token_urlsafe(12) if password is None else None
+    try:
+        validate_password(password or generated, User(username=args.name))
+    except ValidationError as exc:
+        print(f"robotide: password refused: {' '.join(exc.messages)}", file=sys.stderr)
+        return 2
+    with transaction.atomic():
+        user = User.objects.create_user(args.name, password=password or generated)
+        if args.staff:
+            user.is_staff = True
+            user.save(update_fields=["is_staff"])
+        if args.group:
+            group, _ = Group.objects.get_or_create(name=args.group)
+            user.groups.add(group)
+    what = " (staff)" if args.staff else ""
+    where = f" in group {args.group!r}" if args.group else ""
+    if generated:
+        print(f"Created user {args.name!r}{what}{where}, password {generated!r}")
+        print("(shown once; change it at /accounts/password/)")
+    else:
+        print(f"Created user {args.name!r}{what}{where}")
     return 0
 
 

@@ -269,6 +269,32 @@ RUN_ISOLATION = {
     "tmp_mb": env_int("ROBOTIDE_RUN_TMP_MB", 64),
 }
 
+# -- E-mail (programs sent by e-mail: programs.outbound) -------------------------------------------
+# Mail is printed to the server's log until EMAIL_HOST names an SMTP server.
+EMAIL_HOST = os.environ.get("EMAIL_HOST", "")
+EMAIL_PORT = env_int("EMAIL_PORT", 25)
+EMAIL_HOST_USER = os.environ.get("EMAIL_HOST_USER", "")
+EMAIL_HOST_PASSWORD = os.environ.get("EMAIL_HOST_PASSWORD", "")
+EMAIL_USE_TLS = env_bool("EMAIL_USE_TLS", False)  # STARTTLS, usually port 587
+EMAIL_USE_SSL = env_bool("EMAIL_USE_SSL", False)  # TLS from the start, usually port 465
+if EMAIL_USE_TLS and EMAIL_USE_SSL:
+    raise ValueError("EMAIL_USE_TLS and EMAIL_USE_SSL exclude each other: set one")
+EMAIL_TIMEOUT = 10  # a mail server that does not answer is an error, not a hung request
+EMAIL_BACKEND = (
+    "django.core.mail.backends.smtp.EmailBackend"
+    if EMAIL_HOST
+    else "django.core.mail.backends.console.EmailBackend"
+)
+DEFAULT_FROM_EMAIL = os.environ.get("DEFAULT_FROM_EMAIL", "robotide@localhost")
+# Mails one user may send in an hour, so the appliance cannot be used to spam; 0 turns it off.
+EMAIL_PER_HOUR = env_int("ROBOTIDE_EMAIL_PER_HOUR", 20)
+
+# -- Pages (lab rules, robot wiring, exercises: staff edit them in the admin) ---------------------
+# django.contrib.flatpages served under /pages/, listed in the menu, sanitised when shown.
+INSTALLED_APPS += ["django.contrib.sites", "django.contrib.flatpages"]
+SITE_ID = 1
+TEMPLATES[0]["OPTIONS"]["context_processors"].append("robotide.context_processors.menu_pages")
+
 LOGGING = {
     "version": 1,
     "disable_existing_loggers": False,

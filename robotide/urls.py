@@ -1,6 +1,6 @@
 from django.contrib import admin
 from django.contrib.auth import views as auth_views
-from django.urls import path
+from django.urls import include, path
 from django.views.generic import RedirectView
 
 from programs import views as programs
@@ -13,17 +13,28 @@ urlpatterns = [
     path("programs/", programs.program_list, name="program-list"),
     path("programs/new", programs.program_create, name="program-create"),
     path("programs/upload", programs.program_upload, name="program-upload"),
+    path("programs/export", programs.program_export, name="program-export"),
+    path("programs/import", programs.program_import, name="program-import"),
     path("programs/<int:program_id>/", programs.program_edit, name="program-edit"),
     path("programs/<int:program_id>/run", programs.program_run, name="program-run"),
     path("programs/<int:program_id>/download", programs.program_download, name="program-download"),
     path("programs/<int:program_id>/delete", programs.program_delete, name="program-delete"),
+    path("programs/<int:program_id>/email", programs.program_email, name="program-email"),
+    path("programs/<int:program_id>/push", programs.program_push, name="program-push"),
     path("programs/<int:program_id>/revisions/", programs.revision_list, name="revision-list"),
     path(
         "programs/<int:program_id>/revisions/<int:number>/",
         programs.revision_detail,
         name="revision-detail",
     ),
+    path("programs/<int:program_id>/shares/", programs.program_share, name="program-share"),
+    path(
+        "programs/<int:program_id>/shares/<int:share_id>/delete",
+        programs.program_unshare,
+        name="program-unshare",
+    ),
     path("languages/", programs.language_list, name="language-list"),
+    path("pages/", include("django.contrib.flatpages.urls")),
     path("runs/", programs.run_list, name="run-list"),
     path("runs/<int:run_id>/", programs.run_detail, name="run-detail"),
     path("runs/<int:run_id>/log", programs.run_log, name="run-log"),

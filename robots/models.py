@@ -91,8 +91,14 @@ def robot_group(name: str) -> str:
 
 
 def robots_for_user(user):
-    """Every signed-in user may use every robot (group restrictions come with the lab roles)."""
-    return Robot.objects.all() if user.is_authenticated else Robot.objects.none()
+    """The robots ``user`` may use: those of no class in particular, those of their classes
+    (as a member or a teacher), and all of them for admins."""
+    if not user.is_authenticated:
+        return Robot.objects.none()
+    if user.is_superuser:
+        return Robot.objects.all()
+    mine = models.Q(groups__user=user) | models.Q(groups__teachers__user=user)
+    return Robot.objects.filter(models.Q(groups__isnull=True) | mine).distinct()
 
 
 def get_robot_for_user(user, name: str) -> Robot:

@@ -4,10 +4,11 @@ import pytest
 from channels.db import database_sync_to_async
 from channels.layers import get_channel_layer
 from channels.testing import WebsocketCommunicator
-from django.contrib.auth.models import AnonymousUser, User
+from django.contrib.auth.models import AnonymousUser, Group, User
 
 from programs.consumers import RunConsumer, RunListConsumer
 from programs.models import Program, Run
+from robotide.models import ClassTeacher
 from robots.bus import RUNS_GROUP, run_group
 from robots.consumers import RobotConsumer
 from robots.models import Robot
@@ -25,6 +26,15 @@ def make_run(log: bytes):
     run.log_path.parent.mkdir(parents=True)
     run.log_path.write_bytes(log)
     return alice, bob, run
+
+
+def teacher_of(student):
+    """A teacher (staff) of a class the student is in."""
+    group = Group.objects.create(name="class-a")
+    student.groups.add(group)
+    teacher = User.objects.create_user("teacher", is_staff=True)
+    ClassTeacher.objects.create(group=group, user=teacher)
+    return teacher
 
 
 def communicator(consumer, path, user, **kwargs):
@@ -143,7 +153,7 @@ async def test_a_page_rendered_with_the_log_gets_only_what_came_after():
 
 async def test_the_run_list_keeps_what_staff_see_and_where_stop_returns():
     alice, _, run = await make_run(b"")
-    staff = await database_sync_to_async(User.objects.create_user)("teacher", is_staff=True)
+    staff = await database_sync_to_async(teacher_of)(alice)
     comm = communicator(RunListConsumer, "/ws/runs/", staff)
     comm.scope["query_string"] = b"robot=sim"
     assert (await comm.connect())[0]

@@ -142,10 +142,10 @@ def test_another_users_program_is_not_found(client, alice, bob, path):
     assert Program.objects.filter(pk=theirs.pk, source="").exists()
 
 
-def test_staff_see_everyones_programs(client, bob):
-    staff = User.objects.create_user("teacher", password="pw-t-123", is_staff=True)
+def test_admins_see_everyones_programs(client, bob):
+    admin = User.objects.create_user("root", password="pw-t-123", is_staff=True, is_superuser=True)
     Program.objects.create(owner=bob, name="bobs", language="python")
-    client.force_login(staff)
+    client.force_login(admin)
     assert "bobs" in client.get("/programs/").content.decode()
 
 

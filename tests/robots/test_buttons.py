@@ -1,9 +1,10 @@
 """Manual commands on the robot page: set up by the robot's owner or staff, one click runs."""
 
 import pytest
-from django.contrib.auth.models import User
+from django.contrib.auth.models import Group, User
 
 from programs.models import Program, Run
+from robotide.models import ClassTeacher
 from robots.models import Robot, RobotButton
 
 pytestmark = pytest.mark.django_db
@@ -56,12 +57,16 @@ def test_only_the_owner_and_staff_set_up_buttons(client, robot, program):
     client.force_login(student)
     assert client.get(f"/robots/{robot.name}/buttons/").status_code == 403
     other = Program.objects.create(owner=student, name="Mine", language="python")
-    client.force_login(User.objects.create_user("teacher", is_staff=True))
+    teacher = User.objects.create_user("teacher", is_staff=True)
+    group = Group.objects.create(name="class-a")
+    student.groups.add(group)
+    ClassTeacher.objects.create(group=group, user=teacher)
+    client.force_login(teacher)
     response = client.post(
         f"/robots/{robot.name}/buttons/",
         {"label": "Student's", "program": other.pk, "arguments": "", "position": 0},
     )
-    assert response.status_code == 302  # staff may use anyone's program
+    assert response.status_code == 302  # a teacher may use their students' programs
 
 
 def test_one_may_only_pick_ones_own_programs(client, owner, robot):

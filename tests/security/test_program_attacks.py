@@ -26,8 +26,11 @@ LIMITS = {"wall_seconds": 4, "log_size_mb": 1, "processes": 32, "memory_mb": 200
 def app(tmp_path_factory):
     # Not under /tmp/pytest-of-root (0700): without a sandbox, run accounts walk the real path.
     app = Appliance(tmp_path_factory.mktemp("attacks")).start()
-    for name, network in [("jail", "none"), ("lab", "loopback")]:
-        body = {"name": name, "url": "sim://", "settings": {"limits": LIMITS, "network": network}}
+    # "spin": a CPU limit well inside its wall clock, so a loaded machine still reaches it.
+    spin = {**LIMITS, "wall_seconds": 60, "cpu_seconds": 2}
+    for name, network, limits in [("jail", "none", LIMITS), ("lab", "loopback", LIMITS),
+                                  ("spin", "none", spin)]:  # fmt: skip
+        body = {"name": name, "url": "sim://", "settings": {"limits": limits, "network": network}}
         assert app.api("POST", "/api/robots", body).status_code == 201
         wait_for(lambda n=name: app.api("GET", f"/api/robots/{n}/sensors").status_code == 200)
     app.bystander = app.new_user("bystander")
@@ -145,7 +148,7 @@ def test_sleeping_forever_hits_the_wall_clock_limit(app):
 
 
 def test_spinning_hits_the_cpu_limit(app):
-    run, log = attack(app, "while True:\n    pass\n")
+    run, log = attack(app, "while True:\n    pass\n", robot="spin", timeout=90)
     assert run["state"] == "failed" and "CPU time limit reached" in log
 
 
