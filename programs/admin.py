@@ -1,6 +1,11 @@
-from django.contrib import admin
+from django import forms
+from django.contrib import admin, messages
+from django.contrib.auth.models import Group
+from django.db.models import Count
 
-from programs.models import AgentUnreachable, Program, Revision, Run, request_stop
+from programs.models import AgentUnreachable, Program, Revision, Run, Share, request_stop
+from programs.shares import add_share
+from robotide.admin import action_with_form
 
 
 class RevisionInline(admin.TabularInline):
@@ -9,21 +14,105 @@ class RevisionInline(admin.TabularInline):
     fields = ["number", "author", "created"]
     readonly_fields = fields
     show_change_link = True
+    can_delete = False
+
+    def has_add_permission(self, request, obj=None):
+        return False
+
+
+class ShareInline(admin.TabularInline):
+    model = Share
+    extra = 0
+    fields = ["user", "group", "everyone", "can_edit", "created_by", "created"]
+    readonly_fields = ["created_by", "created"]
+    autocomplete_fields = ["user", "group"]
+
+
+class ShareWithGroupForm(forms.Form):
+    group = forms.ModelChoiceField(Group.objects.order_by("name"), help_text="The class")
+    can_edit = forms.BooleanField(required=False, help_text="Its members may edit them too")
 
 
 @admin.register(Program)
 class ProgramAdmin(admin.ModelAdmin):
-    list_display = ["name", "owner", "language", "updated"]
-    list_filter = ["language"]
+    list_display = ["name", "owner", "language", "updated", "shares_count"]
+    list_filter = ["language", ("owner__groups", admin.RelatedOnlyFieldListFilter)]
     search_fields = ["name", "owner__username", "source"]
-    inlines = [RevisionInline]
+    list_select_related = ["owner"]
+    inlines = [ShareInline, RevisionInline]
+    actions = ["share_with_group"]
+
+    def get_queryset(self, request):
+        return super().get_queryset(request).annotate(_shares=Count("shares", distinct=True))
+
+    @admin.display(description="shares", ordering="_shares")
+    def shares_count(self, obj):
+        return obj._shares
+
+    def save_formset(self, request, form, formset, change):
+        for share in formset.save(commit=False):
+            if isinstance(share, Share) and share.created_by_id is None:
+                share.created_by = request.user
+            share.save()
+        for gone in formset.deleted_objects:
+            gone.delete()
+        formset.save_m2m()
+
+    @admin.action(description="Share with a group…")
+    def share_with_group(self, request, queryset):
+        def apply(form, programs):
+            group, can_edit = form.cleaned_data["group"], form.cleaned_data["can_edit"]
+            for program in programs:
+                add_share(program, request.user, group=group.name, can_edit=can_edit)
+            rights = "may edit" if can_edit else "may read and run"
+            self.message_user(
+                request,
+                f"Shared {len(programs)} program(s) with {group.name}: its members {rights} them.",
+                messages.SUCCESS,
+            )
+
+        return action_with_form(
+            self,
+            request,
+            queryset,
+            ShareWithGroupForm,
+            apply,
+            action="share_with_group",
+            title="Share programs with a group",
+            submit_label="Share",
+            explanation="The members of the class you choose will see these programs "
+            "(sharing again with the same class only changes whether they may edit).",
+        )
 
 
 @admin.register(Revision)
 class RevisionAdmin(admin.ModelAdmin):
     list_display = ["program", "number", "author", "created"]
-    search_fields = ["program__name"]
-    readonly_fields = ["program", "number", "author", "created"]
+    list_filter = ["program__language"]
+    search_fields = ["program__name", "author__username"]
+    list_select_related = ["program", "author"]
+    readonly_fields = ["program", "number", "source", "author", "created"]
+
+    def has_add_permission(self, request):
+        return False
+
+    def has_change_permission(self, request, obj=None):
+        return False
+
+
+@admin.register(Share)
+class ShareAdmin(admin.ModelAdmin):
+    list_display = ["program", "target", "can_edit", "created_by", "created"]
+    list_filter = ["can_edit", "everyone", "group"]
+    search_fields = ["program__name", "program__owner__username", "user__username", "group__name"]
+    list_select_related = ["program", "user", "group", "created_by"]
+    autocomplete_fields = ["program", "user", "group"]
+    readonly_fields = ["created_by", "created"]
+
+    def save_model(self, request, obj, form, change):
+        if obj.created_by_id is None:
+            obj.created_by = request.user
+        super().save_model(request, obj, form, change)
 
 
 @admin.register(Run)
@@ -31,24 +120,34 @@ class RunAdmin(admin.ModelAdmin):
     list_display = [
         "pk",
         "program_name",
-        "robot",
         "owner",
+        "robot",
         "state",
         "exit_code",
         "started",
         "ended",
     ]
+    list_display_links = ["pk", "program_name"]
     list_filter = ["state", "robot", "language"]
-    search_fields = ["program_name", "owner__username"]
+    search_fields = ["program_name", "owner__username", "robot__name", "reason"]
+    list_select_related = ["owner", "robot"]
     readonly_fields = [f.name for f in Run._meta.fields]
     actions = ["stop_runs"]
 
-    @admin.action(description="Stop the selected runs")
+    def has_add_permission(self, request):
+        return False
+
+    @admin.action(description="Stop selected runs")
     def stop_runs(self, request, queryset):
         runs = [run for run in queryset.select_related("robot") if run.active]
+        asked = 0
         for run in runs:
             try:
                 request_stop(run)
             except AgentUnreachable as exc:
-                self.message_user(request, str(exc), level="error")
-        self.message_user(request, f"Asked {len(runs)} run(s) to stop.")
+                self.message_user(request, f"Run {run.pk}: {exc}", messages.ERROR)
+            else:
+                asked += 1
+        skipped = queryset.count() - len(runs)
+        note = f" ({skipped} had already ended)" if skipped else ""
+        self.message_user(request, f"Asked {asked} run(s) to stop{note}.", messages.SUCCESS)

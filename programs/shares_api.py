@@ -51,13 +51,13 @@ def list_shares(request, program_id: int):
     return program.shares.select_related("user", "group")
 
 
-@shares_router.post("/{int:program_id}/shares", response={201: ShareOut, 422: Error})
+@shares_router.post("/{int:program_id}/shares", response={201: ShareOut})
 def create_share(request, program_id: int, data: ShareIn):
     program = get_program_for_user(request.user, program_id, OWN)
     try:
         share = add_share(program, request.user, **data.dict())
-    except ShareError as exc:
-        return Status(422, {"detail": str(exc)})
+    except ShareError as exc:  # as ninja's own validation errors: 422
+        raise HttpError(422, str(exc)) from None
     return Status(201, share)
 
 
@@ -124,7 +124,7 @@ def create_group(request, data: GroupIn):
     return Status(201, group)
 
 
-@groups_router.post("/{name}/members", response={200: GroupOut, 422: Error})
+@groups_router.post("/{name}/members", response=GroupOut)
 def add_member(request, name: str, data: MemberIn):
     """Add a student, or with ``"teacher": true`` a teacher, to the class."""
     from robotide.models import ClassTeacher
@@ -135,9 +135,9 @@ def add_member(request, name: str, data: MemberIn):
         raise HttpError(404, f"No group named {name!r}.")
     user = get_user_model().objects.filter(username=data.user).first()
     if user is None:
-        return Status(422, {"detail": f"no user named {data.user!r}"})
+        raise HttpError(422, f"no user named {data.user!r}")
     if data.teacher:
         ClassTeacher.objects.get_or_create(group=group, user=user)
     else:
         user.groups.add(group)
-    return Status(200, group)
+    return group

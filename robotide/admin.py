@@ -1,9 +1,47 @@
-from django.contrib import admin
+from django import forms
+from django.contrib import admin, messages
+from django.contrib.admin.helpers import ACTION_CHECKBOX_NAME
+from django.contrib.auth import admin as auth_admin
+from django.contrib.auth import get_user_model
+from django.contrib.auth.models import Group
+from django.db import transaction
+from django.db.models import Count
+from django.template.response import TemplateResponse
 
-from robotide.models import ApiToken
+from robotide.models import ApiToken, ClassTeacher
 from robotide.security import AdminLoginForm
 
 admin.site.login_form = AdminLoginForm  # throttled like the sign-in page
+
+User = get_user_model()
+
+
+def action_with_form(
+    model_admin, request, queryset, form_class, apply, *, action, title, submit_label,
+    explanation="",
+):  # fmt: skip
+    """An admin action that asks first: an intermediate page with ``form_class``; once it is
+    posted back valid, ``apply(form, objects)`` does the work and the change list comes back."""
+    objects = list(queryset)
+    if "apply" in request.POST:
+        form = form_class(request.POST)
+        if form.is_valid():
+            apply(form, objects)
+            return None  # back to the change list
+    else:
+        form = form_class()
+    context = {
+        **model_admin.admin_site.each_context(request),
+        "opts": model_admin.model._meta,
+        "title": title,
+        "explanation": explanation,
+        "objects": objects,
+        "form": form,
+        "action": action,
+        "submit_label": submit_label,
+        "action_checkbox_name": ACTION_CHECKBOX_NAME,
+    }
+    return TemplateResponse(request, "admin/action_form.html", context)
 
 
 @admin.register(ApiToken)
@@ -11,6 +49,125 @@ class ApiTokenAdmin(admin.ModelAdmin):
     list_display = ["user", "name", "created", "last_used"]
     search_fields = ["user__username", "name"]
     readonly_fields = ["digest", "created", "last_used"]
+
+
+# -- classes (groups) and their teachers, users and what they teach ---------------------------
+
+
+class TeacherInline(admin.TabularInline):
+    model = ClassTeacher
+    extra = 0
+    autocomplete_fields = ["user"]
+    verbose_name = "teacher"
+    verbose_name_plural = "teachers"
+
+
+class TeachingInline(admin.TabularInline):
+    model = ClassTeacher
+    fk_name = "user"
+    extra = 0
+    autocomplete_fields = ["group"]
+    verbose_name = "class taught"
+    verbose_name_plural = "classes taught"
+
+
+admin.site.unregister(Group)
+
+
+@admin.register(Group)
+class GroupAdmin(auth_admin.GroupAdmin):
+    list_display = ["name", "members", "teacher_names"]
+    inlines = [TeacherInline]
+
+    def get_queryset(self, request):
+        return (
+            super()
+            .get_queryset(request)
+            .annotate(_members=Count("user", distinct=True))
+            .prefetch_related("teachers__user")
+        )
+
+    @admin.display(description="members", ordering="_members")
+    def members(self, obj):
+        return obj._members
+
+    @admin.display(description="teachers")
+    def teacher_names(self, obj):
+        return ", ".join(t.user.username for t in obj.teachers.all())
+
+
+class TakeAccessForm(forms.Form):
+    robot = forms.ModelChoiceField(queryset=None, help_text="The robot they may no longer use")
+
+    def __init__(self, *args, **kwargs):
+        from robots.models import Robot
+
+        super().__init__(*args, **kwargs)
+        self.fields["robot"].queryset = Robot.objects.order_by("name")
+
+
+TAKE_ACCESS_EXPLANATION = (
+    "A robot is used by the members and teachers of its classes, or by everyone when it has "
+    "no class. The selected users are taken out of the chosen robot's classes (as members and "
+    "as teachers), which also takes away the other robots and shared programs of those "
+    "classes. If the robot is open to everyone, it is restricted to a new class named "
+    "“<robot>-users” holding every current user but those selected; users created later "
+    "must be added to that class to use it. Superusers keep every robot."
+)
+
+
+def take_away_access(robot, users) -> str:
+    """Take ``robot`` away from ``users``; says what was done."""
+    users = list(users)
+    ids = [u.pk for u in users]
+    with transaction.atomic():
+        groups = list(robot.groups.all())
+        if groups:
+            for group in groups:
+                group.user_set.remove(*users)
+            ClassTeacher.objects.filter(group__in=groups, user__in=ids).delete()
+            names = ", ".join(g.name for g in groups)
+            done = f"Took {len(users)} user(s) out of {robot.name}'s classes ({names})."
+        else:
+            group, _ = Group.objects.get_or_create(name=f"{robot.name}-users"[:150])
+            group.user_set.add(*User.objects.exclude(pk__in=ids))
+            group.user_set.remove(*users)
+            robot.groups.set([group])
+            done = (
+                f"{robot.name} was open to everyone: it is now for the class {group.name}, "
+                f"every user but the {len(users)} selected."
+            )
+    if any(u.is_superuser for u in users):
+        done += " Superusers among them still use every robot."
+    return done
+
+
+admin.site.unregister(User)
+
+
+@admin.register(User)
+class UserAdmin(auth_admin.UserAdmin):
+    inlines = [*auth_admin.UserAdmin.inlines, TeachingInline]
+    list_filter = [*auth_admin.UserAdmin.list_filter, "teaching__group"]
+    actions = ["take_robot_access"]
+
+    @admin.action(description="Take away access to a robot…")
+    def take_robot_access(self, request, queryset):
+        def apply(form, users):
+            robot = form.cleaned_data["robot"]
+            self.message_user(request, take_away_access(robot, users), messages.SUCCESS)
+
+        return action_with_form(
+            self,
+            request,
+            queryset,
+            TakeAccessForm,
+            apply,
+            action="take_robot_access",
+            title="Take away access to a robot",
+            submit_label="Take away access",
+            explanation=TAKE_ACCESS_EXPLANATION,
+        )
 
 
 class _LanguagesOnIndex:

@@ -14,6 +14,7 @@ from programs.api import programs_router, runs_router
 from programs.models import AgentUnreachable, RunRefused
 from programs.shares_api import groups_router, shares_router
 from robotide.models import ApiToken
+from robotide.tokens_api import tokens_router
 from robots.api import robots_router
 from robots.bus import AgentUnavailable
 
@@ -93,6 +94,7 @@ api.add_router("/runs", runs_router)
 api.add_router("/robots", robots_router)
 api.add_router("/programs", shares_router)
 api.add_router("/groups", groups_router)
+api.add_router("/tokens", tokens_router)
 
 
 @api.exception_handler(Http404)

@@ -4,6 +4,7 @@ from django.urls import include, path
 from django.views.generic import RedirectView
 
 from programs import views as programs
+from robotide import views_account as account
 from robotide.api import api
 from robotide.security import LoginForm
 from robots import views as robots
@@ -60,6 +61,12 @@ urlpatterns = [
         "accounts/login/",
         auth_views.LoginView.as_view(authentication_form=LoginForm),
         name="login",
+    ),
+    path("accounts/", account.account, name="account"),
+    path(
+        "accounts/tokens/<int:token_id>/revoke",
+        account.token_revoke,
+        name="account-token-revoke",
     ),
     path("accounts/logout/", auth_views.LogoutView.as_view(), name="logout"),
     path(

@@ -16,7 +16,7 @@ class RobotAdminForm(RobotConfigForm):
     )
 
     class Meta(RobotConfigForm.Meta):
-        fields = ["name", "url", "description", "owner"]
+        fields = ["name", "url", "description", "owner", "groups"]
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -38,6 +38,8 @@ class RobotAdmin(admin.ModelAdmin):
     list_display = ["name", "url", "description", "owner", "isolation", "last_seen"]
     readonly_fields = ["isolation", "last_seen"]
     search_fields = ["name", "url", "description"]
+    list_filter = ["groups"]
+    filter_horizontal = ["groups"]
 
     def get_form(self, request, obj=None, change=False, **kwargs):
         # The admin lays out the fields a form class declares: declare this robot's options.

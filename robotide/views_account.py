@@ -1,0 +1,52 @@
+"""The account page: the user's API tokens, created (the secret shown once) and revoked."""
+
+from django import forms
+from django.contrib import messages
+from django.contrib.auth.decorators import login_required
+from django.shortcuts import get_object_or_404, redirect, render
+from django.views.decorators.cache import never_cache
+from django.views.decorators.http import require_POST
+
+from robotide.models import ApiToken
+
+NEW_TOKEN_KEY = "account_new_token"
+
+
+class TokenForm(forms.Form):
+    name = forms.CharField(
+        max_length=100, required=False, help_text="What it is for, e.g. “laptop” or “CI”"
+    )
+
+
+@never_cache  # the new token's secret is on it once: no copy kept by a cache
+@login_required
+def account(request):
+    if request.method == "POST":
+        form = TokenForm(request.POST)
+        if form.is_valid():
+            token, secret = ApiToken.issue(request.user, form.cleaned_data["name"])
+            # Shown on the next page only: popped from the session as it is shown.
+            request.session[NEW_TOKEN_KEY] = {"id": token.pk, "secret": secret}
+            return redirect("account")
+    else:
+        form = TokenForm()
+    new = request.session.pop(NEW_TOKEN_KEY, None)
+    return render(
+        request,
+        "account/account.html",
+        {
+            "form": form,
+            "tokens": request.user.api_tokens.order_by("-created"),
+            "new_token": new,
+        },
+    )
+
+
+@login_required
+@require_POST
+def token_revoke(request, token_id: int):
+    token = get_object_or_404(ApiToken, pk=token_id, user=request.user)
+    label = token.name or f"created {token.created:%Y-%m-%d %H:%M}"
+    token.delete()
+    messages.success(request, f"Token {label} revoked: it no longer works.")
+    return redirect("account")
