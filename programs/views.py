@@ -4,6 +4,7 @@ import json
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.core.exceptions import PermissionDenied, ValidationError
+from django.db.models import Exists, OuterRef
 from django.http import HttpRequest, HttpResponse, StreamingHttpResponse
 from django.shortcuts import get_object_or_404, redirect, render
 from django.utils.http import content_disposition_header, url_has_allowed_host_and_scheme
@@ -26,7 +27,15 @@ from programs.languages import (
     editor_modes,
     get_language,
 )
-from programs.models import AgentUnreachable, Program, Run, RunRefused, request_stop, start_run
+from programs.models import (
+    AgentUnreachable,
+    Program,
+    Run,
+    RunRefused,
+    Share,
+    request_stop,
+    start_run,
+)
 from programs.runlog import plain_text, render_lines, tail
 from programs.shares import ShareError, add_share
 from robots.models import get_robot_for_user, robots_for_user
@@ -34,16 +43,22 @@ from robots.models import get_robot_for_user, robots_for_user
 
 @login_required
 def program_list(request: HttpRequest) -> HttpResponse:
-    return render(
-        request,
-        "programs/list.html",
-        {
-            "programs": programs_for_user(request.user),
-            "new_form": NewProgramForm(owner=request.user, auto_id="new_%s"),
-            "upload_form": UploadForm(owner=request.user, auto_id="upload_%s"),
-            "robots": robots_for_user(request.user),
-        },
-    )
+    return render(request, "programs/list.html", _list_context(request))
+
+
+def _list_context(request) -> dict:
+    visible = programs_for_user(request.user)
+    gallery = Share.objects.filter(program=OuterRef("pk"), everyone=True)
+    return {
+        "programs": visible.filter(owner=request.user),
+        # Shared with them, their classes' programs for a teacher, everything for admins.
+        "others": visible.exclude(owner=request.user)
+        .annotate(in_gallery=Exists(gallery))
+        .order_by("owner__username", "name"),
+        "new_form": NewProgramForm(owner=request.user, auto_id="new_%s"),
+        "upload_form": UploadForm(owner=request.user, auto_id="upload_%s"),
+        "robots": robots_for_user(request.user),
+    }
 
 
 @login_required
@@ -76,13 +91,7 @@ def program_upload(request: HttpRequest) -> HttpResponse:
 
 
 def _list_with_errors(request, **forms) -> HttpResponse:
-    context = {
-        "programs": programs_for_user(request.user),
-        "new_form": NewProgramForm(owner=request.user, auto_id="new_%s"),
-        "upload_form": UploadForm(owner=request.user, auto_id="upload_%s"),
-        "robots": robots_for_user(request.user),
-        **forms,
-    }
+    context = {**_list_context(request), **forms}
     return render(request, "programs/list.html", context, status=400)
 
 
