@@ -32,7 +32,7 @@ TRACK = 0.4
 QUICK = {"sync": 0.02, "heartbeat": 0.05}
 
 
-async def until(predicate, timeout=3.0):
+async def until(predicate, timeout=10.0):
     """Wait for ``predicate`` (plain or async) to hold; the bus is asynchronous."""
     deadline = time.monotonic() + timeout
     while True:
@@ -415,7 +415,7 @@ async def test_heartbeat_loss_is_a_clear_error_until_the_drive_returns(robot, ba
     await until(lambda: base.left.velocity == 0)
 
     await asyncio.to_thread(base.right.start)  # powered again: PRE-OPERATIONAL, not enabled
-    await until(lambda: robot.connected, timeout=5.0)
+    await until(lambda: robot.connected, timeout=15.0)
     assert base.right.state == "OPERATION ENABLED" and base.right.boots == 2
     assert base.commanded() == (0.0, 0.0), "motion does not resume by itself"
     await robot.drive(-0.1, 0.0)
@@ -428,7 +428,7 @@ async def test_a_drive_that_restarts_is_brought_up_again(robot, base):
         base.right.start()  # boots within the heartbeat timeout: the boot-up message tells
 
     await asyncio.to_thread(restart)
-    await until(lambda: base.right.state == "OPERATION ENABLED", timeout=5.0)
+    await until(lambda: base.right.state == "OPERATION ENABLED", timeout=15.0)
     await until(lambda: robot.connected)
     await robot.drive(0.1, 0.0)
     await until(lambda: base.right.velocity == wheel_targets(0.1, 0.0)[1])
@@ -746,7 +746,7 @@ async def test_dbc_feedback_loss_is_a_clear_error_until_it_returns(dbc_base):
         await dbc_robot.drive(0.2, 0.0)
     sent = len(dbc_base.commands)
     await dbc_base.replug()
-    await until(lambda: dbc_robot.connected, timeout=5.0)
+    await until(lambda: dbc_robot.connected, timeout=15.0)
     assert all(c["LinearSpeed"] == 0 for c in dbc_base.commands[sent:]), "no old speed again"
     await dbc_robot.drive(-0.1, 0.0)
     await until(lambda: dbc_base.commanded() == (-0.1, 0.0))
@@ -817,7 +817,7 @@ async def test_a_program_drives_turns_and_stops_on_either_base(make):
             await emu.unplug()
             await until(lambda: failing(bot.sensors))
             await emu.replug()
-            await until(lambda: bot.connected, timeout=5.0)
+            await until(lambda: bot.connected, timeout=15.0)
             await bot.drive(0.1, 0.0)
             await until(lambda: emu.commanded() == pytest.approx((0.1, 0.0), abs=1e-3))
     finally:

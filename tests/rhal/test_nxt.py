@@ -34,7 +34,7 @@ POWER_STEP = TOP_SPEED / 100  # m/s one unit of power stands for
 ON, BRAKE, REGULATED = 0x01, 0x02, 0x04
 
 
-async def until(predicate, timeout=3.0):
+async def until(predicate, timeout=10.0):
     """Wait for ``predicate`` (plain or async) to hold; the wire is asynchronous."""
     deadline = time.monotonic() + timeout
     while True:

@@ -18,7 +18,7 @@ from rhal.pioneer import PioneerRobot
 from tests.rhal.arcos_emulator import ArcosEmulator, arcos_checksum, arcos_packet
 
 
-async def until(predicate, timeout=3.0):
+async def until(predicate, timeout=10.0):
     """Wait for ``predicate`` (plain or async) to hold; the wire is asynchronous."""
     deadline = time.monotonic() + timeout
     while True:
