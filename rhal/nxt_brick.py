@@ -44,33 +44,23 @@ import asyncio
 import contextlib
 import logging
 import math
-import os
-import re
-import select
 import struct
-import termios
-import threading
 import time
-import tty
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
-from urllib.parse import unquote, urlsplit
 
-import nxt.backend.bluetooth
-import nxt.backend.devfile
-import nxt.brick
 import nxt.error
-import nxt.locator
-import nxt.motor
 import nxt.sensor
-import nxt.sensor.generic
-import nxt.telegram
-from nxt.motor import Mode, RegulationMode, RunState
 
 from rhal.base import Robot
 from rhal.errors import RobotConnectionError
 from rhal.kinematics import advance_pose, compass_heading
+from rhal.nxt_links import BluetoothLink as BluetoothLink
+from rhal.nxt_links import DevFileLink as DevFileLink
+from rhal.nxt_links import ErrorCounter, parse_url
+from rhal.nxt_links import ReplyScanner as ReplyScanner
+from rhal.nxt_session import MOTOR_PORTS, _Session
 
 #: The NXT motor (53787) turns at about 170 rpm without load at full power on 9 V: what
 #: power 100 stands for. Under load it does less, which speed regulation makes up for
@@ -83,24 +73,8 @@ NOTHING_IN_REACH = 255  # cm
 START_POSE = (0.0, 0.0, math.pi / 2)  # where the robot is when opened, facing "north"
 BATTERY_EVERY = 10  # polls between battery readings: once a second at the default rate
 BACKOFF_FIRST, BACKOFF_MAX = 0.2, 5.0  # s between reconnection attempts, doubling
-MOTOR_PORTS = {"A": nxt.motor.Port.A, "B": nxt.motor.Port.B, "C": nxt.motor.Port.C}
-MAX_TELEGRAM = 64  # bytes: the NXT's largest telegram
-#: Length of each reply nxt-python waits for here (type, opcode, status, data).
-REPLY_LENGTHS = {
-    0x06: 25,  # GetOutputState
-    0x07: 16,  # GetInputValues
-    0x0B: 5,  # GetBatteryLevel
-    0x0D: 7,  # KeepAlive
-    0x0E: 4,  # LSGetStatus
-    0x0F: 3,  # LSWrite
-    0x10: 20,  # LSRead
-    0x88: 7,  # GetFirmwareVersion
-    0x9B: 33,  # GetDeviceInfo
-}
-#: Replies that are not what was asked for: a corrupted or misframed telegram. The brick
 #: answering with an error status is nxt.error.DirectProtocolError, a subclass.
 GARBLED = (nxt.error.ProtocolError, struct.error, ValueError, IndexError)
-BT_ADDRESS = re.compile(r"^[0-9A-F]{2}(:[0-9A-F]{2}){5}$")
 
 logger = logging.getLogger(__name__)
 
@@ -478,394 +452,12 @@ class NxtRobot(Robot):
             self._wheels = {"left": dl / dt, "right": dr / dt}
 
 
-class _Session:
-    """One connection to a brick: every blocking nxt-python call, run on the worker thread."""
-
-    def __init__(self, robot: NxtRobot) -> None:
-        self.robot = robot
-        self.brick: nxt.brick.Brick | None = None
-        self.sensors: dict[str, Any] = {}
-
-    def connect(self) -> dict[str, Any]:
-        robot = self.robot
-        self.brick = _open_brick(robot)
-        brick = self.brick
-        sleep_ms = brick.keep_alive()
-        (prot_major, prot_minor), (fw_major, fw_minor) = brick.get_firmware_version()
-        name, address, _, _ = brick.get_device_info()
-        self.motors_off()  # the NXT keeps running what it was last told, even without us
-        ports = robot.sensor_ports
-        generic = nxt.sensor.generic
-        if "ultrasonic" in ports:
-            port = _input(ports["ultrasonic"])
-            self.sensors["ultrasonic"] = generic.Ultrasonic(brick, port, check_compatible=False)
-        if "touch" in ports:
-            self.sensors["touch"] = generic.Touch(brick, _input(ports["touch"]))
-        if "light" in ports:
-            light = generic.Light(brick, _input(ports["light"]), illuminated=robot.floodlight)
-            lamp = "LIGHT_ACTIVE" if robot.floodlight else "LIGHT_INACTIVE"
-            # Percent (0 dark .. 100 bright) rather than nxt-python's raw 0..1023.
-            light.set_input_mode(nxt.sensor.Type[lamp], nxt.sensor.Mode.PERCENT)
-            self.sensors["light"] = light
-        if "sound" in ports:
-            sound = generic.Sound(brick, _input(ports["sound"]), adjusted=True)
-            sound.set_input_mode(nxt.sensor.Type.SOUND_DBA, nxt.sensor.Mode.PERCENT)
-            self.sensors["sound"] = sound
-        return {
-            "name": name,
-            "address": address,
-            "firmware": f"{fw_major}.{fw_minor}",
-            "protocol": f"{prot_major}.{prot_minor}",
-            "sleep_timeout_ms": sleep_ms,
-        }
-
-    def close(self) -> None:
-        brick, self.brick = self.brick, None
-        if brick is not None:
-            with contextlib.suppress(OSError):
-                brick.close()
-
-    def _brick(self) -> nxt.brick.Brick:
-        if self.brick is None:
-            raise ConnectionResetError("the link is closed")
-        return self.brick
-
-    # -- motors ----------------------------------------------------------------------------
-
-    def run(self, left: int, right: int) -> None:
-        robot = self.robot
-        for port, power, reverse in (
-            (robot.left, left, robot.reverse_left),
-            (robot.right, right, robot.reverse_right),
-        ):
-            self._brick().set_output_state(
-                MOTOR_PORTS[port],
-                -power if reverse else power,
-                Mode.ON | Mode.REGULATED,
-                RegulationMode.SPEED,
-                0,
-                RunState.RUNNING,
-                nxt.motor.LIMIT_RUN_FOREVER,
-            )
-
-    def stop(self, brake: bool) -> None:
-        """The stop command: power 0, motors on, braked (or floating), on both motors."""
-        if brake:
-            mode, regulation = Mode.ON | Mode.BRAKE | Mode.REGULATED, RegulationMode.SPEED
-        else:
-            mode, regulation = Mode.ON, RegulationMode.IDLE
-        for port in (self.robot.left, self.robot.right):
-            self._brick().set_output_state(
-                MOTOR_PORTS[port], 0, mode, regulation, 0, RunState.RUNNING, 0
-            )
-
-    def motors_off(self) -> None:
-        """Both drive motors off (not powered, not braked), as when the brick starts."""
-        for port in (self.robot.left, self.robot.right):
-            self._brick().set_output_state(
-                MOTOR_PORTS[port], 0, Mode.IDLE, RegulationMode.IDLE, 0, RunState.IDLE, 0
-            )
-
-    def rotation(self, port: str) -> int:
-        """The motor's rotation count: degrees since the brick started its program."""
-        state = self._brick().get_output_state(MOTOR_PORTS[port])
-        if state[0] != MOTOR_PORTS[port]:
-            raise nxt.error.ProtocolError(f"asked for motor {port}, got {state[0].name}")
-        return state[9]
-
-    # -- sensors ---------------------------------------------------------------------------
-
-    def distance(self) -> int:
-        """Centimetres to the nearest echo; 255 when nothing is in reach; -1 on I2C errors."""
-        try:
-            return self.sensors["ultrasonic"].get_distance()
-        except nxt.error.DirectProtocolError:  # the sensor did not answer on the I2C bus
-            return -1
-
-    def analog(self, kind: str) -> int | None:
-        """The scaled value (bool, percent) of an analog sensor, None until it is valid."""
-        sensor = self.sensors[kind]
-        values = sensor.get_input_values()
-        if values.port != sensor._port:
-            raise nxt.error.ProtocolError(f"asked for sensor {sensor._port}, got {values.port}")
-        return values.scaled_value if values.valid else None
-
-    def battery(self) -> int:
-        return self._brick().get_battery_level()
-
-    def keep_alive(self) -> int:
-        return self._brick().keep_alive()
-
-
-# -- links: nxt-python's sockets, reading replies with a timeout and resynchronising ------
-
-
-class ErrorCounter:
-    """Replies dropped, counted on the worker thread and on the event loop."""
-
-    def __init__(self) -> None:
-        self.count = 0
-        self._lock = threading.Lock()
-
-    def add(self) -> None:
-        with self._lock:
-            self.count += 1
-
-
-class ReplyScanner:
-    """Cuts replies out of a stream of length-prefixed telegrams, skipping anything else.
-
-    A reply starts with its length (3..64, little-endian, so the high byte is 0), then type
-    0x02 and the opcode of the command it answers, then a status nxt-python knows; its
-    length is the one that opcode's reply has (or shorter, with an error status). Bytes
-    before such a header are noise: skipped, and each run of them counted once.
-    """
-
-    def __init__(self) -> None:
-        self.buffer = bytearray()
-        self.skipped = 0  # runs of bytes dropped
-
-    def feed(self, data: bytes) -> None:
-        self.buffer += data
-
-    def take(self, opcode: int) -> bytes | None:
-        """The next reply to ``opcode`` (without its length prefix), or None for now."""
-        buffer = self.buffer
-        start = _find_header(buffer, opcode)
-        if start is None:
-            # No whole header yet: keep only a tail that could still grow into one.
-            start = len(buffer)
-            for tail in range(max(0, len(buffer) - 4), len(buffer)):
-                if _could_start(buffer[tail:], opcode):
-                    start = tail
-                    break
-        if start:
-            del buffer[:start]
-            self.skipped += 1
-        if len(buffer) < 5 or len(buffer) < 2 + buffer[0]:
-            return None
-        size = buffer[0]
-        reply = bytes(buffer[2 : 2 + size])
-        del buffer[: 2 + size]
-        return reply
-
-
-def _find_header(buffer: bytearray, opcode: int) -> int | None:
-    for start in range(len(buffer) - 4):
-        if _is_header(buffer[start : start + 5], opcode):
-            return start
-    return None
-
-
-def _is_header(head: bytes | bytearray, opcode: int) -> bool:
-    size, high, kind, code, status = head
-    if high != 0 or kind != 0x02 or code != opcode or status not in nxt.telegram.CODES:
-        return False
-    expected = REPLY_LENGTHS.get(opcode, MAX_TELEGRAM)
-    if status == 0 and opcode in REPLY_LENGTHS:
-        return size == expected
-    return 3 <= size <= expected
-
-
-def _could_start(tail: bytes | bytearray, opcode: int) -> bool:
-    """Whether ``tail`` (under 5 bytes) can still grow into a header."""
-    pattern = (None, 0, 0x02, opcode)
-    if tail and not 3 <= tail[0] <= MAX_TELEGRAM:
-        return False
-    return all(want is None or got == want for got, want in zip(tail, pattern, strict=False))
-
-
-class ScanningReader:
-    """``recv`` for a stream link: waits ``timeout`` at most and resynchronises on noise.
-
-    Mixed into nxt-python's socket classes, whose ``send`` frames each telegram.
-    """
-
-    timeout: float
-    errors: ErrorCounter
-    _scanner: ReplyScanner
-    _expect: int | None = None
-
-    def _reader_init(self, timeout: float, errors: ErrorCounter) -> None:
-        self.timeout, self.errors = timeout, errors
-        self._scanner = ReplyScanner()
-
-    def _before_sending(self, data: bytes) -> None:
-        # The brick only speaks when spoken to: whatever came in since the last reply is
-        # stale (a reply that came too late) or noise. Drop it, so it cannot pass for the
-        # reply to this command.
-        stale = bool(self._scanner.buffer)
-        self._scanner.buffer.clear()
-        while self._read_some(0):
-            stale = True
-        if stale:
-            self.errors.add()
-        # Telegram type bit 7 set: no reply wanted. Otherwise byte 1 is the opcode.
-        self._expect = None if data[0] & 0x80 else data[1]
-
-    def _read_some(self, timeout: float) -> bytes | None:
-        """What has arrived, b"" at end of stream, None if nothing came within timeout."""
-        raise NotImplementedError
-
-    def recv(self) -> bytes:
-        deadline = time.monotonic() + self.timeout
-        scanner, opcode = self._scanner, self._expect
-        if opcode is None:
-            raise nxt.error.ProtocolError("waiting for a reply to nothing")
-        while True:
-            before = scanner.skipped
-            reply = scanner.take(opcode)
-            if scanner.skipped != before:
-                self.errors.add()
-            if reply is not None:
-                self._expect = None
-                return reply
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise TimeoutError(f"no reply from the brick within {self.timeout:g} s")
-            data = self._read_some(remaining)
-            if data == b"":
-                raise ConnectionResetError("the brick closed the link")
-            if data:
-                scanner.feed(data)
-
-
-class DevFileLink(ScanningReader, nxt.backend.devfile.DevFileSock):
-    """nxt-python's device-file socket (``/dev/rfcomm0``), opened O_NOCTTY."""
-
-    def __init__(self, filename: str, timeout: float, errors: ErrorCounter) -> None:
-        super().__init__(filename)
-        self._device = None
-        self._reader_init(timeout, errors)
-
-    def connect(self) -> nxt.brick.Brick:
-        fd = os.open(self._filename, os.O_RDWR | os.O_NOCTTY | os.O_CLOEXEC)
-        try:
-            self._device = open(fd, "r+b", buffering=0)  # noqa: SIM115 - closed by close()
-        except BaseException:
-            os.close(fd)
-            raise
-        try:
-            tty.setraw(fd)
-            termios.tcflush(fd, termios.TCIOFLUSH)  # nothing stale from an earlier session
-        except termios.error:
-            pass  # not a terminal (a FIFO, a socket file): nothing to set
-        return nxt.brick.Brick(self)
-
-    def send(self, data: bytes) -> None:
-        if self._device is None:
-            raise ConnectionResetError("the link is closed")
-        self._before_sending(data)
-        super().send(data)
-
-    def _read_some(self, timeout: float) -> bytes | None:
-        if self._device is None:
-            raise ConnectionResetError("the link is closed")
-        readable, _, _ = select.select([self._device], [], [], timeout)
-        if not readable:
-            return None
-        return os.read(self._device.fileno(), 4096)
-
-
-class BluetoothLink(ScanningReader, nxt.backend.bluetooth.BluetoothSock):
-    """nxt-python's Bluetooth (RFCOMM) socket, through PyBluez."""
-
-    def __init__(self, bluetooth: Any, host: str, timeout: float, errors: ErrorCounter) -> None:
-        super().__init__(bluetooth, host)
-        self._reader_init(timeout, errors)
-
-    def send(self, data: bytes) -> None:
-        if self._sock is None:
-            raise ConnectionResetError("the link is closed")
-        self._before_sending(data)
-        super().send(data)
-
-    def _read_some(self, timeout: float) -> bytes | None:
-        if self._sock is None:
-            raise ConnectionResetError("the link is closed")
-        self._sock.settimeout(timeout)  # 0: non-blocking
-        try:
-            return self._sock.recv(4096)
-        except (TimeoutError, BlockingIOError):  # TimeoutError is socket.timeout
-            return None
-
-
-def _open_brick(robot: NxtRobot) -> nxt.brick.Brick:
-    """Connect the link the URL names; blocking, on the worker thread."""
-    if robot.link == "dev":
-        return DevFileLink(robot.target, robot.timeout, robot._errors).connect()
-    if robot.link == "bt":
-        try:
-            import bluetooth  # PyBluez; its BluetoothError is an OSError
-        except ImportError as exc:
-            raise RobotConnectionError(
-                "Bluetooth by address needs PyBluez (pip install pybluez), which is not "
-                "installed; or bind the brick to a serial device (sudo rfcomm bind 0 "
-                f"{robot.target}) and use nxt:///dev/rfcomm0"
-            ) from exc
-        return BluetoothLink(bluetooth, robot.target, robot.timeout, robot._errors).connect()
-    filters = {"name": robot.target} if robot.target else {}
-    if robot.target and BT_ADDRESS.match(robot.target):
-        filters = {"host": robot.target}
-    try:
-        return nxt.locator.find(backends=["usb"], config=None, **filters)
-    except ImportError as exc:
-        raise RobotConnectionError(f"NXT over USB needs pyusb: {exc}") from exc
-    except nxt.locator.BrickNotFoundError:
-        which = f" matching {robot.target!r}" if robot.target else ""
-        raise RobotConnectionError(f"no NXT brick{which} found on USB") from None
-    except ValueError as exc:
-        if type(exc).__name__ != "NoBackendError":  # pyusb's: no libusb
-            raise
-        raise RobotConnectionError(
-            f"NXT over USB needs libusb (e.g. apt install libusb-1.0-0): {exc}"
-        ) from exc
-
-
-def parse_url(url: str) -> tuple[str, str | None]:
-    """``("usb", name or address or None)``, ``("bt", address)`` or ``("dev", path)``."""
-    parts = urlsplit(url)
-    if parts.scheme.lower() != "nxt":
-        raise ValueError(f"not an nxt URL: {url!r}")
-    where, path = parts.netloc.lower(), unquote(parts.path)
-    if not where:
-        return ("dev", path) if path.strip("/") else ("usb", None)
-    target = path.strip("/")
-    if where == "usb":
-        return "usb", _address(target) or target or None
-    if where in ("bt", "bluetooth"):
-        address = _address(target)
-        if address is None:
-            raise ValueError(
-                f"nxt://bt/ needs the brick's Bluetooth address, like "
-                f"nxt://bt/00:16:53:01:02:03, not {target!r}"
-            )
-        return "bt", address
-    raise ValueError(
-        f"unknown NXT link {parts.netloc!r} in {url!r}; use nxt://, nxt://usb/NAME, "
-        "nxt://bt/00:16:53:01:02:03 or nxt:///dev/rfcomm0"
-    )
-
-
-def _address(text: str) -> str | None:
-    """``00:16:53:01:02:03`` for that or ``001653010203`` (the NXT's USB serial number)."""
-    digits = text.upper().replace(":", "")
-    if len(digits) != 12 or not all(c in "0123456789ABCDEF" for c in digits):
-        return None
-    address = ":".join(digits[i : i + 2] for i in range(0, 12, 2))
-    return address if BT_ADDRESS.match(text.upper()) or ":" not in text else None
-
-
 def _reason(exc: BaseException) -> str:
     return str(exc) or type(exc).__name__
 
 
 def _metres(centimetres: int) -> float | None:
     return None if centimetres >= NOTHING_IN_REACH else centimetres / 100.0
-
-
-def _input(port: int) -> nxt.sensor.Port:
-    return nxt.sensor.Port(port - 1)
 
 
 def _motor_port(name: str, value: Any) -> str:
