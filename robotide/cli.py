@@ -13,6 +13,10 @@ robotide import USERNAME FILE [--replace]
 robotide user add NAME [--staff] [--group G] [--password-stdin]
                                  create an account; its password is printed once if generated
                                  (else from standard input or ROBOTIDE_USER_PASSWORD)
+robotide route VEHICLE --to ENDPOINT [--to ...]
+                                 the MAVLink router alone, no web application: VEHICLE is
+                                 DEVICE[:BAUD], udp:HOST:PORT (listened on) or tcp:HOST:PORT;
+                                 each ENDPOINT udp:HOST:PORT (sent to), udpin:, tcp: or tcpin:
 robotide manage ...              Django's manage.py commands
 """
 
@@ -76,12 +80,24 @@ def main(argv: list[str] | None = None) -> int:
         "--password-stdin", action="store_true",
         help="read the password from standard input (or set ROBOTIDE_USER_PASSWORD)",
     )  # fmt: skip
+    route = commands.add_parser("route", help="the MAVLink router alone (no web application)")
+    route.add_argument("vehicle", help="DEVICE[:BAUD], udp:HOST:PORT or tcp:HOST:PORT")
+    route.add_argument(
+        "--to", action="append", default=[], metavar="ENDPOINT",
+        help="udp:HOST:PORT (client), udpin:HOST:PORT, tcp:HOST:PORT, tcpin:HOST:PORT",
+    )  # fmt: skip
+    route.add_argument("--baud", type=int, default=115200, help="when VEHICLE names none")
+    route.add_argument("--stats", type=float, default=0, help="print stats every N s")
     commands.add_parser("manage", help="Django management commands", add_help=False)
     args, rest = parser.parse_known_args(argv)
     if args.command == "robots":
         if rest:
             parser.error(f"unrecognized arguments: {' '.join(rest)}")
         return cmd_detect(args)
+    if args.command == "route":
+        if rest:
+            parser.error(f"unrecognized arguments: {' '.join(rest)}")
+        return cmd_route(args)
     if args.command != "manage" and rest:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
     # What the server writes is its own; run accounts get only what is opened to them.
@@ -112,6 +128,43 @@ def cmd_detect(args) -> int:
     if not findings and not args.json:
         print("No device here looks like a robot this version drives.", file=sys.stderr)
     return 0
+
+
+def cmd_route(args) -> int:
+    """No Django: the router alone, until SIGTERM or SIGINT."""
+    from gateway.router import Router, endpoint_from_spec
+
+    try:
+        endpoints = [endpoint_from_spec(args.vehicle, vehicle=True, baud=args.baud)]
+        endpoints += [endpoint_from_spec(spec) for spec in args.to]
+    except ValueError as exc:
+        print(f"robotide route: {exc}", file=sys.stderr)
+        return 2
+
+    async def run() -> int:
+        router = Router()
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(sig, stop.set)
+        try:
+            for endpoint in endpoints:
+                try:
+                    await router.add(endpoint)
+                except (OSError, ValueError) as exc:
+                    print(f"robotide route: {endpoint.name}: {exc}", file=sys.stderr)
+                    return 1
+            while not stop.is_set():
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(stop.wait(), args.stats or None)
+                if args.stats:
+                    for row in router.stats():
+                        print(json.dumps(row), file=sys.stderr)
+        finally:
+            await router.close()
+        return 0
+
+    return asyncio.run(run())
 
 
 def cmd_up(args, rest) -> int:
