@@ -360,11 +360,14 @@ async def test_odometry_follows_the_motors_while_driving(robot, emulator):
     await robot.stop()
 
     def agrees(readings):
+        # The heading follows the counts exactly; the position is integrated one poll (0.1 s,
+        # longer on a loaded machine) at a time, as one arc even when the poll spans the
+        # change from driving to turning: centimetres, not millimetres, on a busy machine.
         x, y, theta = emulator.pose()
         position = readings["position"]
         return (
-            position["x"] == pytest.approx(x, abs=0.002)
-            and position["y"] == pytest.approx(y, abs=0.002)
+            position["x"] == pytest.approx(x, abs=0.03)
+            and position["y"] == pytest.approx(y, abs=0.03)
             and math.remainder(position["theta"] - theta, math.tau) == pytest.approx(0, abs=0.01)
         )
 
