@@ -8,7 +8,6 @@ interface-local group, which never leaves the computer.
 """
 
 import asyncio
-import inspect
 import json
 import math
 import struct
@@ -25,24 +24,12 @@ from rhal import NotSupportedError, RobotConnectionError
 from rhal.canbus import CanRobot, parse_url
 from rhal.options import driver_options
 from tests.rhal.can_emulator import Cia402BaseEmulator, Cia402Drive, DbcBaseEmulator
+from tests.waiting import until
 
 COUNTS_PER_METRE = 4096 / (math.pi * 0.2)  # the emulator's defaults: 4096 counts, 0.2 m wheel
 TRACK = 0.4
 #: SYNC at 50 Hz and heartbeats at 20 Hz: a quicker walk up the state machine.
 QUICK = {"sync": 0.02, "heartbeat": 0.05}
-
-
-async def until(predicate, timeout=10.0):
-    """Wait for ``predicate`` (plain or async) to hold; the bus is asynchronous."""
-    deadline = time.monotonic() + timeout
-    while True:
-        result = predicate()
-        if inspect.isawaitable(result):
-            result = await result
-        if result:
-            return result
-        assert time.monotonic() < deadline, "condition not met in time"
-        await asyncio.sleep(0.01)
 
 
 async def failing(call):

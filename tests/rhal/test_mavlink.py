@@ -1,11 +1,9 @@
 """The mavlink:// driver at the wire, against a MAVLink vehicle emulator that keeps the rules."""
 
 import asyncio
-import inspect
 import json
 import math
 import re
-import time
 
 import pytest
 from hypothesis import given, settings
@@ -16,6 +14,7 @@ import rhal
 from rhal import NotSupportedError, RobotConnectionError
 from rhal.mavlink import VELOCITY_YAW_RATE_MASK, MavlinkRobot, VehicleControlError
 from tests.rhal.mavlink_emulator import MavlinkEmulator
+from tests.waiting import until
 
 REQUESTED = {
     mavlink.MAVLINK_MSG_ID_ATTITUDE,
@@ -27,19 +26,6 @@ REQUESTED = {
     mavlink.MAVLINK_MSG_ID_VFR_HUD,
 }
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
-
-
-async def until(predicate, timeout=10.0):
-    """Wait for ``predicate`` (plain or async) to hold; the wire is asynchronous."""
-    deadline = time.monotonic() + timeout
-    while True:
-        result = predicate()
-        if inspect.isawaitable(result):
-            result = await result
-        if result:
-            return result
-        assert time.monotonic() < deadline, "condition not met in time"
-        await asyncio.sleep(0.02)
 
 
 @pytest.fixture

@@ -1,8 +1,6 @@
 """The nxt:// driver at the wire: nxt-python's protocol against an NXT brick emulator on a pty."""
 
-import asyncio
 import errno
-import inspect
 import json
 import math
 import os
@@ -10,7 +8,6 @@ import socket
 import struct
 import sys
 import threading
-import time
 import tty
 import types
 
@@ -28,23 +25,11 @@ import rhal
 from rhal import NotSupportedError, RobotConnectionError
 from rhal.nxt_brick import DevFileLink, ErrorCounter, NxtRobot, ReplyScanner, parse_url
 from tests.rhal.nxt_emulator import NxtEmulator
+from tests.waiting import until
 
 TOP_SPEED = 170 / 60 * math.pi * 0.056  # m/s of a 56 mm wheel at power 100
 POWER_STEP = TOP_SPEED / 100  # m/s one unit of power stands for
 ON, BRAKE, REGULATED = 0x01, 0x02, 0x04
-
-
-async def until(predicate, timeout=10.0):
-    """Wait for ``predicate`` (plain or async) to hold; the wire is asynchronous."""
-    deadline = time.monotonic() + timeout
-    while True:
-        result = predicate()
-        if inspect.isawaitable(result):
-            result = await result
-        if result:
-            return result
-        assert time.monotonic() < deadline, "condition not met in time"
-        await asyncio.sleep(0.01)
 
 
 @pytest.fixture

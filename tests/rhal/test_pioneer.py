@@ -1,11 +1,9 @@
 """The pioneer:// driver at the wire, against an ARCOS robot emulator on a pty or a socket."""
 
 import asyncio
-import inspect
 import json
 import math
 import os
-import time
 import tty
 
 import pytest
@@ -16,19 +14,7 @@ import rhal
 from rhal import NotSupportedError, RobotConnectionError, arcos
 from rhal.pioneer import PioneerRobot
 from tests.rhal.arcos_emulator import ArcosEmulator, arcos_checksum, arcos_packet
-
-
-async def until(predicate, timeout=10.0):
-    """Wait for ``predicate`` (plain or async) to hold; the wire is asynchronous."""
-    deadline = time.monotonic() + timeout
-    while True:
-        result = predicate()
-        if inspect.isawaitable(result):
-            result = await result
-        if result:
-            return result
-        assert time.monotonic() < deadline, "condition not met in time"
-        await asyncio.sleep(0.02)
+from tests.waiting import until
 
 
 @pytest.fixture
