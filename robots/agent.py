@@ -1,7 +1,8 @@
 """The robot agent: the only process that owns a robot's hardware and its programs.
 
 It takes commands from the channel layer (run.start, run.stop, robot.estop, robot.sensors,
-robot.state, robot.camera), serves the Robot API socket to the programs it launched, and
+robot.state, hand driving and the control lease, robot.reconfigure, and through `handlers`
+the camera hub's camera.*), serves the Robot API socket to the programs it launched, and
 publishes their output, the run states and the robot's telemetry to groups. Embedded mode runs
 one agent per robot inside the web server process (AgentManager); fleet mode runs
 `robotide agent NAME`.
@@ -272,8 +273,6 @@ class RobotAgent:
             await self.take_control(Holder("teleop", message["owner"], message["user"]))
         elif kind == "robot.reconfigure":
             await self.reconfigure()
-        elif kind == "robot.camera":
-            await self.reply(message, {"jpeg": await self.driver.camera_jpeg()})
         elif kind in self.handlers:
             await self.handlers[kind](message)
         else:
