@@ -135,6 +135,9 @@ class Endpoint:
 class Router:
     def __init__(self):
         self.endpoints: dict[int, Endpoint] = {}
+        # Called as tap(frames) once per read, with the frames that passed the source's filters
+        # (a .tlog recorder): only bytes, so a slow tap is the tap's own business.
+        self.taps: list = []
 
     async def add(self, endpoint: Endpoint) -> Endpoint:
         endpoint.router = self
@@ -167,6 +170,7 @@ class Router:
         stats.frames_in += len(frames)
         others = [e for e in self.endpoints.values() if e is not source]
         touched = set()
+        routed = [] if self.taps else None
         seen = source.systems
         now = time.monotonic()
         for frame, sysid, compid, msgid, tsys, tcomp in frames:
@@ -178,6 +182,8 @@ class Router:
             if source.read_only or not source.accepts(msgid):
                 stats.drops += 1
                 continue
+            if routed is not None:
+                routed.append(frame)
             for endpoint in others:
                 if tsys and not endpoint.sees(tsys, tcomp):
                     continue
@@ -187,6 +193,9 @@ class Router:
                 touched.add(endpoint)
         for endpoint in touched:
             endpoint.flush()
+        if routed:
+            for tap in self.taps:
+                tap(routed)
 
     def stats(self) -> list[dict]:
         return [e.as_dict() for e in self.endpoints.values()]
