@@ -22,6 +22,7 @@ from programs.access import (
 from programs.languages import LANGUAGES, get_language
 from programs.models import MAX_SOURCE_BYTES, Program, Run, request_stop, start_run
 from programs.runlog import plain_text
+from robotide.schemas import Body
 from robots.models import get_robot_for_user
 
 programs_router = Router(tags=["programs"])
@@ -32,7 +33,7 @@ LANGUAGE_ENUM = {"enum": list(LANGUAGES)}
 RunState = Literal[tuple(Run.State.values)]
 
 
-class ProgramIn(Schema):
+class ProgramIn(Body):
     name: str = Field(min_length=1, max_length=100)
     language: str = Field(json_schema_extra=LANGUAGE_ENUM)
     source: str = ""
@@ -99,7 +100,7 @@ class ProgramOut(Schema):
     origin: str = ""
 
 
-class RunIn(Schema):
+class RunIn(Body):
     robot: str = Field(min_length=1)
     args: list[str] = []
 
@@ -251,7 +252,7 @@ def list_languages(request):
     ]  # fmt: skip
 
 
-class EmailIn(Schema):
+class EmailIn(Body):
     to: str = Field(min_length=1, max_length=320, description="one e-mail address")
 
 
@@ -260,7 +261,7 @@ class EmailOut(Schema):
     attachment: str = Field(description="the attached file's name")
 
 
-class PushIn(Schema):
+class PushIn(Body):
     url: str = Field(
         min_length=1,
         max_length=outbound.MAX_URL,

@@ -12,12 +12,13 @@ from ninja.responses import Status
 from programs.access import OWN, get_program_for_user
 from programs.api import Error, ProgramOut, _program_out
 from programs.shares import ShareError, add_share, copy_program
+from robotide.schemas import Body
 
 shares_router = Router(tags=["sharing"])
 groups_router = Router(tags=["groups"])
 
 
-class ShareIn(Schema):
+class ShareIn(Body):
     user: str = ""
     group: str = ""
     everyone: bool = False
@@ -41,7 +42,7 @@ class ShareOut(Schema):
         return share.group.name if share.group_id else None
 
 
-class CopyIn(Schema):
+class CopyIn(Body):
     name: str = Field("", max_length=100)
 
 
@@ -79,7 +80,7 @@ def copy(request, program_id: int, data: CopyIn):
 # -- classes ------------------------------------------------------------------------------
 
 
-class GroupIn(Schema):
+class GroupIn(Body):
     name: str = Field(pattern=r"^[\w.@+-]{1,150}$")
 
 
@@ -97,7 +98,7 @@ class GroupOut(Schema):
         return sorted(group.teachers.values_list("user__username", flat=True))
 
 
-class MemberIn(Schema):
+class MemberIn(Body):
     user: str
     teacher: bool = False
 

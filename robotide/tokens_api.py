@@ -9,11 +9,12 @@ from ninja.responses import Status
 from ninja.security import django_auth
 
 from robotide.models import ApiToken
+from robotide.schemas import Body
 
 tokens_router = Router(tags=["tokens"])
 
 
-class TokenIn(Schema):
+class TokenIn(Body):
     name: str = Field("", max_length=100)
 
 

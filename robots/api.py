@@ -1,4 +1,3 @@
-import json
 import re
 
 from django.db import IntegrityError
@@ -9,6 +8,7 @@ from pydantic import field_validator, model_validator
 
 import rhal
 from programs.api import Error
+from robotide.schemas import Body
 from robots.bus import announce_robot_sync, ask_agent_sync, reconfigure_sync
 from robots.driver_settings import check_settings, known_driver
 from robots.models import Robot, get_robot_for_user, robots_for_user
@@ -19,7 +19,7 @@ robots_router = Router(tags=["robots"])
 DRIVER_URL = {"pattern": f"^({'|'.join(re.escape(scheme) for scheme in sorted(rhal.DRIVERS))})://"}
 
 
-class RobotIn(Schema):
+class RobotIn(Body):
     name: str = Field(pattern=r"^[a-zA-Z0-9_-]{1,50}$")
     url: str = Field(min_length=1, max_length=500, json_schema_extra=DRIVER_URL)
     settings: dict = {}
@@ -36,7 +36,7 @@ class RobotIn(Schema):
         return self
 
 
-class RobotPatch(Schema):
+class RobotPatch(Body):
     url: str | None = Field(None, min_length=1, max_length=500, json_schema_extra=DRIVER_URL)
     settings: dict | None = None
     description: str | None = Field(None, max_length=200)
@@ -82,9 +82,6 @@ def update_robot(request, name: str, data: RobotPatch):
     """Change a robot's URL, settings or description; its agent reopens the robot with them."""
     if not request.user.is_staff:
         raise HttpError(403, "Only staff may change robots.")
-    # Every field is optional, and ninja reads a body that is no object as one with none.
-    if not isinstance(json.loads(request.body or b"{}"), dict):
-        raise HttpError(422, "the body must be a JSON object")
     robot = get_robot_for_user(request.user, name)
     changes = data.dict(exclude_none=True)
     url, settings = changes.get("url", robot.url), changes.get("settings", robot.settings)

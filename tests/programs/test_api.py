@@ -65,6 +65,20 @@ def test_malformed_json_is_a_client_error(alice):
     assert 400 <= response.status_code < 500
 
 
+@pytest.mark.parametrize("body", ['"x"', "3", "[1]", "null"])
+def test_a_body_that_is_not_an_object_is_refused(api, body):
+    program = api("POST", "/api/programs", {"name": "b", "language": "python"}).json()
+    # Every field of these is optional: without the check any JSON would do as {}.
+    for method, path in [
+        ("POST", f"/api/programs/{program['id']}/copy"),
+        ("PUT", f"/api/programs/{program['id']}"),
+        ("POST", f"/api/programs/{program['id']}/shares"),
+    ]:
+        response = api(method, path, body)
+        assert response.status_code == 422, (path, response.content)
+        assert "must be a JSON object" in response.text
+
+
 def test_no_or_wrong_credentials(client):
     assert client.get("/api/programs").status_code == 401
     wrong = Client(HTTP_AUTHORIZATION="Bearer rt_nope").get("/api/programs")
