@@ -31,6 +31,9 @@ from gateway.framing import Framer
 log = logging.getLogger(__name__)
 UDP_MAX = 1472
 QUEUE_LIMIT = 256 * 1024
+# A system or a UDP peer not heard from for this long is forgotten: a ground station that
+# left, a program that ended. (Ground stations and MAVSDK send a HEARTBEAT every second.)
+FORGET_AFTER = 30.0
 
 
 @dataclass
@@ -44,6 +47,27 @@ class Stats:
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
+
+
+class Rates:
+    """Per-second rates of a Stats, from the difference between two samples."""
+
+    FIELDS = ("frames_in", "frames_out", "bytes_in", "bytes_out", "drops", "parse_errors")
+
+    def __init__(self):
+        self._last: tuple[float, dict] | None = None
+        self.per_second: dict[str, float] = dict.fromkeys(self.FIELDS, 0.0)
+
+    def sample(self, stats: Stats, now: float) -> None:
+        current = {name: getattr(stats, name) for name in self.FIELDS}
+        if self._last is not None:
+            then, previous = self._last
+            span = now - then
+            if span > 0:
+                self.per_second = {
+                    name: round((current[name] - previous[name]) / span, 1) for name in self.FIELDS
+                }
+        self._last = (now, current)
 
 
 _ids = itertools.count(1)
@@ -67,6 +91,8 @@ class Endpoint:
         self._sysids: set[int] = set()
         self._framer = Framer()
         self._pending: list[bytes] = []
+        self.rates = Rates()
+        self.last_error = ""
 
     # -- the router calls these
     async def start(self) -> None:
@@ -122,13 +148,32 @@ class Endpoint:
         self.systems[(sysid, compid)] = time.monotonic()
         self._sysids.add(sysid)
 
+    def forget_older_than(self, when: float) -> None:
+        stale = [key for key, seen in self.systems.items() if seen < when]
+        for key in stale:
+            del self.systems[key]
+        if stale:
+            self._sysids = {sysid for sysid, _ in self.systems}
+
+    @property
+    def status(self) -> str:
+        """ "up", or "down" with ``last_error`` saying why."""
+        return "up"
+
     def as_dict(self) -> dict:
+        now = time.monotonic()
         return {
             "id": self.id,
             "name": self.name,
             "read_only": self.read_only,
+            "status": self.status,
+            "error": self.last_error,
             "stats": self.stats.as_dict(),
-            "systems": sorted(self.systems),
+            "rates": dict(self.rates.per_second),
+            "systems": [
+                {"system": sysid, "component": compid, "seen": round(now - seen, 1)}
+                for (sysid, compid), seen in sorted(self.systems.items())
+            ],
         }
 
 
@@ -200,6 +245,18 @@ class Router:
     def stats(self) -> list[dict]:
         return [e.as_dict() for e in self.endpoints.values()]
 
+    def tick(self) -> None:
+        """Once a second or so: the rates, and forget who has been silent too long."""
+        now = time.monotonic()
+        for endpoint in list(self.endpoints.values()):
+            endpoint.rates.sample(endpoint.stats, now)
+            endpoint.forget_older_than(now - FORGET_AFTER)
+
+    async def ticking(self, period: float = 1.0) -> None:
+        while True:
+            self.tick()
+            await asyncio.sleep(period)
+
 
 # ---------------------------------------------------------------- endpoints
 
@@ -236,10 +293,17 @@ def _batches(frames: list[bytes], limit: int):
         yield b"".join(batch)
 
 
+def host_port(address: tuple) -> str:
+    host, port = address[:2]
+    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+
+
 def split_address(address: str) -> tuple[str, int]:
     host, _, port = address.rpartition(":")
-    if not host or not port.isdigit():
-        raise ValueError(f"not HOST:PORT: {address!r}")
+    if host.startswith("[") and host.endswith("]"):  # [::1]:14550
+        host = host[1:-1]
+    if not host or not port.isdigit() or int(port) > 65535:
+        raise ValueError(f"not HOST:PORT (port 0 to 65535): {address!r}")
     return host, int(port)
 
 
@@ -259,6 +323,7 @@ class UdpEndpoint(Endpoint):
         self.name = self.name or f"udp{'in' if self.mode == 'server' else ''}:{self.address}"
         self.peers: dict[tuple, float] = {}
         self._sock = None
+        self.bound: tuple | None = None
 
     async def start(self):
         loop = asyncio.get_running_loop()
@@ -278,6 +343,7 @@ class UdpEndpoint(Endpoint):
             sock.close()
             raise
         self._sock = sock
+        self.bound = sock.getsockname()[:2]
         loop.add_reader(sock.fileno(), self._readable)
 
     async def stop(self):
@@ -285,6 +351,22 @@ class UdpEndpoint(Endpoint):
             asyncio.get_running_loop().remove_reader(self._sock.fileno())
             self._sock.close()
             self._sock = None
+
+    @property
+    def status(self) -> str:
+        return "up" if self._sock is not None else "down"
+
+    def forget_older_than(self, when: float) -> None:
+        super().forget_older_than(when)
+        for peer in [peer for peer, seen in self.peers.items() if seen < when]:
+            del self.peers[peer]
+
+    def as_dict(self) -> dict:
+        row = super().as_dict()
+        row["bound"] = host_port(self.bound) if self.bound else None
+        if self.mode == "server":
+            row["peers"] = [host_port(peer) for peer in self.peers]
+        return row
 
     def _readable(self):
         sock, chunks = self._sock, []
@@ -296,7 +378,7 @@ class UdpEndpoint(Endpoint):
                 break
             except OSError:  # ICMP port unreachable: the peer is not up yet
                 continue
-            if server and addr not in self.peers:
+            if server:
                 self.peers[addr] = time.monotonic()
             chunks.append(data)
         if chunks:
@@ -312,7 +394,7 @@ class UdpEndpoint(Endpoint):
         for data in _batches(frames, UDP_MAX):
             try:
                 if self.mode == "server":
-                    for peer in self.peers:
+                    for peer in list(self.peers):
                         sock.sendto(data, peer)
                 else:
                     sock.send(data)
@@ -333,6 +415,7 @@ class _Reconnecting(Endpoint):
         self._lost = asyncio.Event()
         self.connected = asyncio.Event()
         self.last_error = ""
+        self.lost_listeners: list = []  # called with the reason when an open link drops
 
     async def _open(self):
         raise NotImplementedError
@@ -360,10 +443,16 @@ class _Reconnecting(Endpoint):
             self._framer = Framer()  # a new link starts mid-frame
             await asyncio.sleep(delay)
 
+    @property
+    def status(self) -> str:
+        return "up" if self._transport is not None else "connecting"
+
     def _on_lost(self, exc):
         if exc:
             self.last_error = str(exc)
         self._lost.set()
+        for listener in list(self.lost_listeners):
+            listener(self.last_error or "closed by the other end")
 
     async def stop(self):
         if self._task:
@@ -462,6 +551,13 @@ class TcpServerEndpoint(Endpoint):
     async def start(self):
         host, port = split_address(self.address)
         self._server = await asyncio.get_running_loop().create_server(self._protocol, host, port)
+        self.bound = self._server.sockets[0].getsockname()[:2]
+
+    def as_dict(self) -> dict:
+        row = super().as_dict()
+        row["bound"] = host_port(self.bound) if self._server else None
+        row["clients"] = [client.name for client in self.clients]
+        return row
 
     def _protocol(self):
         client = _TcpConnection(

@@ -41,6 +41,7 @@ import contextlib
 import math
 import time
 from collections import deque
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 import serial_asyncio
@@ -129,6 +130,9 @@ class MavlinkRobot(MavlinkControl, MavlinkTelemetry, Robot):
         #: the vehicle the driver talks to, from its HEARTBEAT: system, component, autopilot
         #: ("ardupilot", "px4" or another MAV_AUTOPILOT name) and type (e.g. "GROUND_ROVER")
         self.vehicle: dict[str, Any] = {}
+        #: set by an agent that shares the vehicle link through its MAVLink router: a
+        #: coroutine function giving a link (read, send, abort, close) for each connection
+        self.link_factory: Callable[[], Awaitable[Any]] | None = None
         self._mav = mavlink2.MAVLink(None, srcSystem=self.sysid, srcComponent=COMPONENT)
         self._parser = _new_parser()
         self._old_errors = 0  # bad frames counted by the parsers of earlier links
@@ -319,7 +323,20 @@ class MavlinkRobot(MavlinkControl, MavlinkTelemetry, Robot):
             raise
         return link
 
+    def vehicle_link(self) -> dict:
+        """The vehicle link as a gateway endpoint spec, for an agent that routes it."""
+        if self.device is not None:
+            return {"type": "serial", "device": self.device, "baud": self.baud}
+        host, port = self.address
+        if self.listen is None:
+            return {"type": "tcp", "mode": "client", "address": f"{host}:{port}"}
+        if self.listen:
+            return {"type": "udp", "mode": "server", "address": f"{host or '0.0.0.0'}:{port}"}
+        return {"type": "udp", "mode": "client", "address": f"{host}:{port}"}
+
     async def _open_link(self) -> _Link:
+        if self.link_factory is not None:
+            return await self.link_factory()
         if self.device is not None:
             reader, writer = await serial_asyncio.open_serial_connection(
                 url=self.device, baudrate=self.baud

@@ -17,6 +17,7 @@ from robotide.models import ApiToken
 from robotide.tokens_api import tokens_router
 from robots.api import robots_router
 from robots.bus import AgentUnavailable
+from robots.gateway_api import gateway_router
 
 
 class BearerToken(HttpBearer):
@@ -92,6 +93,7 @@ api = RobotideAPI(
 api.add_router("/programs", programs_router)
 api.add_router("/runs", runs_router)
 api.add_router("/robots", robots_router)
+api.add_router("/robots", gateway_router)
 api.add_router("/programs", shares_router)
 api.add_router("/groups", groups_router)
 api.add_router("/tokens", tokens_router)

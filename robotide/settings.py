@@ -269,6 +269,14 @@ RUN_ISOLATION = {
     "tmp_mb": env_int("ROBOTIDE_RUN_TMP_MB", 64),
 }
 
+# -- MAVLink gateway (robots.gateway): the endpoints a mavlink:// robot starts with.
+# Ground stations (QGroundControl, Mission Planner) reach the robot on UDP 14550; programs run
+# here get their endpoint's address in ROBOT_MAVLINK.
+GATEWAY_DEFAULTS = {
+    "gcs": os.environ.get("ROBOTIDE_GATEWAY_GCS", "0.0.0.0:14550"),
+    "programs": os.environ.get("ROBOTIDE_GATEWAY_PROGRAMS", "127.0.0.1:14551"),
+}
+
 # -- E-mail (programs sent by e-mail: programs.outbound) -------------------------------------------
 # Mail is printed to the server's log until EMAIL_HOST names an SMTP server.
 EMAIL_HOST = os.environ.get("EMAIL_HOST", "")

@@ -44,6 +44,7 @@ from programs.watch import RunWatch, signal_account
 from robots import rpc
 from robots.bus import MANAGER_CHANNEL, RUNS_GROUP, run_group
 from robots.camera import CameraHub
+from robots.gateway import Gateway
 from robots.lease import ControlLease, Holder, LeaseHeld
 from robots.models import Robot, agent_channel, robot_group
 from robots.robot_api import RobotApi
@@ -101,6 +102,8 @@ class RobotAgent:
         self.handlers: dict[str, Callable[[dict], Awaitable[None]]] = {}
         self.camera = CameraHub(self)
         self.handlers.update(self.camera.handlers)
+        self.gateway = Gateway(self)
+        self.handlers.update(self.gateway.handlers)
         self._outbox: asyncio.Queue = asyncio.Queue()
         self._tasks: list[asyncio.Task] = []
         self._starting: set[asyncio.Task] = set()
@@ -118,6 +121,7 @@ class RobotAgent:
     async def start(self) -> None:
         robot = await self._load_robot()
         self.driver = rhal.connect(robot.url, **robot.driver_options())
+        await self.gateway.attach(self.driver)
         await self.open_robot()
         self.units = flat_units(self.driver.capabilities().get("sensors", {}))
         lost = await database_sync_to_async(Run.mark_lost)(self.name)
@@ -161,6 +165,7 @@ class RobotAgent:
         old, self.driver, self.motion_owner = self.driver, driver, None
         with contextlib.suppress(Exception):
             await old.close()  # stops the motors first
+        await self.gateway.attach(driver)
         self.units = flat_units(driver.capabilities().get("sensors", {}))
         self.link_error = None
         await self.open_robot()
@@ -213,6 +218,8 @@ class RobotAgent:
                 await self.driver.close()
             except Exception:  # the rest of the shutdown must happen all the same
                 log.exception("agent %s: closing the robot failed", self.name)
+        with contextlib.suppress(Exception):
+            await self.gateway.close()  # after the driver: it disarms through the router
         for task in self._tasks:
             task.cancel()
         # Deliver what is queued (the final run states) before going away.
@@ -337,6 +344,7 @@ class RobotAgent:
                 "ROBOT_TOKEN": token,
                 "ROBOT_NAME": self.name,
                 "ROBOT_RUN_ID": str(run_id),
+                **self.gateway.program_env(),
             },
             clients_dir=self.isolation.clients(),
         )

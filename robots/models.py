@@ -38,6 +38,10 @@ class Robot(models.Model):
         help_text="Who looks after it: with staff, configures its buttons",
     )
 
+    gateway_seeded = models.BooleanField(
+        default=False, editable=False, help_text="Its default gateway endpoints were made"
+    )
+
     class Meta:
         ordering = ["name"]
 
@@ -80,6 +84,58 @@ class RobotButton(models.Model):
     def arguments(self) -> str:
         """The arguments as they would be typed: ``dock 'bay two'``."""
         return shlex.join(self.args)
+
+
+class GatewayEndpoint(models.Model):
+    """One more endpoint of a MAVLink robot's router: a ground station, programs, a radio."""
+
+    ROLES = [("", "added"), ("gcs", "ground stations"), ("programs", "programs on this robot")]
+
+    robot = models.ForeignKey(Robot, on_delete=models.CASCADE, related_name="endpoints")
+    type = models.CharField(max_length=10, choices=[(t, t) for t in ("udp", "tcp", "serial")])
+    mode = models.CharField(
+        max_length=10, blank=True, choices=[("server", "server (listens)"), ("client", "client")]
+    )
+    address = models.CharField(max_length=200, blank=True, help_text="HOST:PORT (UDP, TCP)")
+    device = models.CharField(max_length=200, blank=True, help_text="serial device path")
+    baud = models.PositiveIntegerField(null=True, blank=True)
+    read_only = models.BooleanField(
+        default=False, help_text="Receives everything; what it sends is dropped"
+    )
+    allow = models.JSONField(
+        null=True, blank=True, help_text="Only these message ids pass (JSON list); empty: all"
+    )
+    block = models.JSONField(default=list, blank=True, help_text="These message ids never pass")
+    role = models.CharField(max_length=10, blank=True, choices=ROLES, editable=False)
+    created = models.DateTimeField(default=timezone.now, editable=False)
+
+    class Meta:
+        ordering = ["robot", "id"]
+
+    def __str__(self) -> str:
+        from gateway.specs import describe
+
+        try:
+            return f"{self.robot.name}: {describe(self.spec())}"
+        except (KeyError, ValueError):
+            return f"{self.robot.name}: endpoint {self.pk}"
+
+    def spec(self) -> dict:
+        """As gateway.specs describes endpoints."""
+        spec = {"type": self.type, "read_only": self.read_only, "allow": self.allow}
+        spec["block"] = self.block or []
+        if self.type == "serial":
+            spec.update(device=self.device, baud=self.baud)
+        else:
+            spec.update(mode=self.mode, address=self.address)
+        return spec
+
+    def set_spec(self, spec: dict) -> None:
+        """From a spec gateway.specs.check has cleaned."""
+        self.type = spec["type"]
+        self.mode, self.address = spec.get("mode", ""), spec.get("address", "")
+        self.device, self.baud = spec.get("device", ""), spec.get("baud")
+        self.read_only, self.allow, self.block = spec["read_only"], spec["allow"], spec["block"]
 
 
 def agent_channel(name: str) -> str:

@@ -35,6 +35,9 @@ if [ -n "$need" ]; then
     apt-get install -y -qq --no-install-recommends $need >/dev/null
 fi
 
+# pymavlink for the programs of the MAVLink gateway's tests.
+"$(dirname "$0")/install-program-libs.sh"
+
 # The services, as this kind of machine starts them, if they are down.
 if ! redis-cli -h 127.0.0.1 ping >/dev/null 2>&1; then
     mkdir -p /var/lib/redis /var/log/redis

@@ -12,6 +12,8 @@ pytest_plugins = ["tests.robot_api_server"]
 def _test_settings(settings, tmp_path):
     settings.RUNS_DIR = tmp_path / "runs"
     settings.PASSWORD_HASHERS = ["django.contrib.auth.hashers.MD5PasswordHasher"]
+    # Any free port: tests run side by side, and never listen beyond loopback.
+    settings.GATEWAY_DEFAULTS = {"gcs": "127.0.0.1:0", "programs": "127.0.0.1:0"}
 
 
 @pytest.fixture(scope="module")

@@ -6,84 +6,21 @@ runs on each, and the robot's own stop is seen on the wire when a program ends, 
 browser that drove it leaves, and on an emergency stop.
 """
 
-import asyncio
-import contextlib
 import time
 
 import pytest
 from channels.db import database_sync_to_async
-from channels.layers import get_channel_layer
 from channels.testing import WebsocketCommunicator
 from django.contrib.auth.models import User
 
-from programs.models import Program, Run, start_run
-from robots.agent import RobotAgent
 from robots.bus import ask_agent, send_to_agent
 from robots.consumers import RobotConsumer
-from robots.models import Robot
-from tests.peers import KINDS, LINKED, WIRED, start_peer
+from tests.e2e.agents import finished, output_of, run_program, until
+from tests.peers import KINDS, LINKED, WIRED
 
 pytestmark = pytest.mark.django_db(transaction=True)
 
 EXAMPLE = "programs/examples/any_robot.py"
-
-
-async def until(predicate, timeout=10.0, what="condition"):
-    deadline = time.monotonic() + timeout
-    while not (result := predicate()):
-        assert time.monotonic() < deadline, f"{what} not met within {timeout} s"
-        await asyncio.sleep(0.05)
-    return result
-
-
-@pytest.fixture
-async def robot_on(tmp_path):
-    """``await robot_on(kind)`` -> (peer, agent, robot row, user), all torn down after."""
-    started = []
-
-    # Messages other tests left on the in-memory layer (a run.start for "run 1" of another
-    # database) must not reach this test's agent.
-    await get_channel_layer().flush()
-
-    async def start(kind):
-        peer = await start_peer(kind, tmp_path)
-        robot = await database_sync_to_async(Robot.objects.create)(name=kind, url=peer.url)
-        agent = RobotAgent(kind)
-        task = asyncio.create_task(agent.serve())
-        started.append((peer, task))
-        await asyncio.wait_for(agent.ready.wait(), 15)
-        await until(lambda: agent.driver.is_open, what=f"{kind} robot open")
-        user = await database_sync_to_async(User.objects.create_user)(f"student-{kind}")
-        return peer, agent, robot, user
-
-    yield start
-    for peer, task in started:
-        task.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await task
-        await peer.stop()
-
-
-@database_sync_to_async
-def run_program(user, robot, source: str, language="python") -> Run:
-    program = Program.objects.create(owner=user, name=f"p{time.monotonic_ns()}", language=language)
-    program.save_source(source, user)
-    return start_run(program, robot, user)
-
-
-async def finished(run: Run, timeout=30.0) -> Run:
-    deadline = time.monotonic() + timeout
-    while True:
-        await database_sync_to_async(run.refresh_from_db)()
-        if run.state not in Run.ACTIVE:
-            return run
-        assert time.monotonic() < deadline, f"run {run.pk} still {run.state}"
-        await asyncio.sleep(0.1)
-
-
-def output_of(run: Run) -> str:
-    lines = run.log_path.read_text().splitlines()
-    return "\n".join(line[2:] for line in lines if line.startswith("o "))
 
 
 @pytest.mark.parametrize("kind", KINDS)

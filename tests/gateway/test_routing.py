@@ -1,5 +1,6 @@
 """The routing rules, with in-memory endpoints: three links, several systems."""
 
+import time
 from dataclasses import dataclass, field
 
 import pytest
@@ -103,7 +104,7 @@ async def test_stats_count_frames_bytes_and_systems():
     row = next(r for r in router.stats() if r["name"] == "vehicle")
     assert row["stats"]["frames_in"] == 1
     assert row["stats"]["parse_errors"] == 0
-    assert row["systems"] == [(1, 1), (1, 100), (2, 1)]
+    assert [(s["system"], s["component"]) for s in row["systems"]] == [(1, 1), (1, 100), (2, 1)]
     assert next(r for r in router.stats() if r["name"] == "gcs")["stats"]["frames_out"] == 1
 
 
@@ -118,3 +119,23 @@ def test_endpoint_specs(spec, kind, mode):
     endpoint = endpoint_from_spec(spec)
     assert type(endpoint).__name__ == kind
     assert mode is None or endpoint.mode == mode
+
+
+async def test_rates_per_second_and_silent_systems_forgotten(monkeypatch):
+    router, vehicle, gcs, program = await three()
+    clock = [time.monotonic()]
+    monkeypatch.setattr("gateway.router.time.monotonic", lambda: clock[0])
+    router.tick()
+    for t in range(50):
+        vehicle.received(attitude(1, 1, t))
+    clock[0] += 2.0
+    router.tick()
+    rates = next(r for r in router.stats() if r["name"] == "vehicle")["rates"]
+    assert rates["frames_in"] == 25.0
+    assert next(r for r in router.stats() if r["name"] == "gcs")["rates"]["frames_out"] == 25.0
+    program.received(heartbeat(7, 1))
+    clock[0] += 31.0
+    program.received(heartbeat(8, 1))
+    router.tick()  # 7 silent for 31 s: forgotten, a command to it is broadcast no more there
+    assert [s["system"] for s in program.as_dict()["systems"]] == [8]
+    assert not program.sees(7, 0) and program.sees(8, 1)

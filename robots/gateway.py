@@ -1,0 +1,216 @@
+"""A robot agent's MAVLink gateway: the router that shares a mavlink:// robot's vehicle link.
+
+Its endpoints: the vehicle link (the robot's URL), the RHAL driver (an endpoint inside this
+process), and the robot's GatewayEndpoint rows: by default one for ground stations and one
+for the programs run here, whose address reaches them as ``ROBOT_MAVLINK``. Rows are applied
+at start and on ``gateway.reload``; ``gateway.stats`` answers with every endpoint's live stats.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+
+from channels.db import database_sync_to_async
+from django.conf import settings
+
+from gateway import specs
+from gateway.local import RouterLink, open_local_link
+from gateway.router import Endpoint, Router, TcpServerEndpoint
+from robots.models import GatewayEndpoint, Robot
+
+log = logging.getLogger(__name__)
+
+VEHICLE_WAIT = 3.0  # s the driver waits for a serial or TCP vehicle link being opened
+
+
+class Gateway:
+    def __init__(self, agent):
+        self.agent = agent
+        self.router: Router | None = None
+        self.vehicle: Endpoint | None = None
+        self.vehicle_spec: dict | None = None
+        self.vehicle_error = ""
+        self.running: dict[int, tuple[dict, Endpoint]] = {}  # row id -> (spec, endpoint)
+        self.failed: dict[int, tuple[dict, str]] = {}  # row id -> (spec, why it did not start)
+        self.roles: dict[int, str] = {}
+        self.links: set[RouterLink] = set()
+        self._ticker: asyncio.Task | None = None
+        self._applying = asyncio.Lock()
+        self.handlers = {"gateway.stats": self._stats_asked, "gateway.reload": self._reload_asked}
+
+    # -- the driver --------------------------------------------------------------------------
+
+    async def attach(self, driver) -> None:
+        """Before ``driver`` opens: route its link if it is a MAVLink one, else no router."""
+        if not hasattr(driver, "vehicle_link"):
+            await self.close()
+            return
+        if self.router is None:
+            self.router = Router()
+            self._ticker = asyncio.create_task(self.router.ticking(), name="gateway ticks")
+            await self._seed_defaults()
+            await self.reload()
+        await self._use_vehicle(driver.vehicle_link())
+        driver.link_factory = self.open_driver_link
+
+    async def _use_vehicle(self, spec: dict) -> None:
+        if spec == self.vehicle_spec and self.vehicle is not None:
+            return
+        if self.vehicle is not None:
+            await self.router.remove(self.vehicle)
+        self.vehicle, self.vehicle_spec, self.vehicle_error = None, spec, ""
+        endpoint = specs.build(spec, name="vehicle")
+        if hasattr(endpoint, "lost_listeners"):
+            endpoint.lost_listeners.append(self._vehicle_lost)
+        try:
+            self.vehicle = await self.router.add(endpoint)
+        except OSError as exc:
+            self.vehicle_error = str(exc)
+            log.error("agent %s: vehicle link %s: %s", self.agent.name, endpoint.name, exc)
+
+    async def open_driver_link(self) -> RouterLink:
+        """The driver's link for one connection: an endpoint of the router."""
+        vehicle = self.vehicle
+        if vehicle is None:
+            raise ConnectionError(f"the vehicle link cannot be opened: {self.vehicle_error}")
+        connected = getattr(vehicle, "connected", None)
+        if connected is not None and not connected.is_set():
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(connected.wait(), VEHICLE_WAIT)
+            if not connected.is_set():
+                why = vehicle.last_error or "not connected yet"
+                raise ConnectionError(f"the vehicle link {vehicle.name} is down: {why}")
+        link = await open_local_link(self.router)
+        self.links = {old for old in self.links if not old.endpoint.closed}
+        self.links.add(link)
+        return link
+
+    def _vehicle_lost(self, why: str) -> None:
+        # The driver hears it now rather than after its HEARTBEAT timeout.
+        for link in list(self.links):
+            link.endpoint.abort(f"the vehicle link {self.vehicle.name} was lost: {why}")
+        self.links.clear()
+
+    # -- the rows ----------------------------------------------------------------------------
+
+    async def _seed_defaults(self) -> None:
+        await database_sync_to_async(seed_defaults)(self.agent.name)
+
+    async def reload(self) -> None:
+        """Make the running endpoints what the rows say: start new, restart changed, stop gone."""
+        rows = await database_sync_to_async(_rows_of)(self.agent.name)
+        async with self._applying:
+            for row_id in set(self.running) - set(rows):
+                await self.router.remove(self.running.pop(row_id)[1])
+            for row_id in set(self.failed) - set(rows):
+                del self.failed[row_id]
+            for row_id, (role, spec) in rows.items():
+                self.roles[row_id] = role
+                if row_id in self.running and self.running[row_id][0] == spec:
+                    continue
+                if row_id in self.failed and self.failed[row_id][0] == spec:
+                    continue
+                await self._start_row(row_id, spec)
+
+    async def _start_row(self, row_id: int, spec: dict) -> None:
+        if row_id in self.running:
+            await self.router.remove(self.running.pop(row_id)[1])
+        self.failed.pop(row_id, None)
+        try:
+            endpoint = specs.build(spec, name=specs.describe(spec))
+            await self.router.add(endpoint)
+        except (OSError, ValueError) as exc:  # in use, no such host: this endpoint alone
+            self.failed[row_id] = (spec, str(exc) or type(exc).__name__)
+            log.warning("agent %s: endpoint %s: %s", self.agent.name, row_id, exc)
+            return
+        self.running[row_id] = (spec, endpoint)
+
+    # -- what others ask -----------------------------------------------------------------------
+
+    def program_env(self) -> dict[str, str]:
+        """``ROBOT_MAVLINK``: the programs' endpoint, as pymavlink's connection string."""
+        for row_id, (_, endpoint) in self.running.items():
+            if self.roles.get(row_id) == "programs" and getattr(endpoint, "bound", None):
+                host, port = endpoint.bound[:2]
+                if host in ("0.0.0.0", "::"):
+                    host = "127.0.0.1"
+                return {"ROBOT_MAVLINK": f"udpout:{host}:{port}", "MAVLINK20": "1"}
+        return {}
+
+    def stats(self) -> dict:
+        if self.router is None:
+            return {"active": False, "endpoints": {}}
+        found: dict = {}
+        if self.vehicle is not None:
+            found["vehicle"] = self.vehicle.as_dict()
+        else:
+            found["vehicle"] = {"status": "error", "error": self.vehicle_error}
+        found["vehicle"]["spec"] = self.vehicle_spec
+        drivers = [link.endpoint.as_dict() for link in self.links]
+        if drivers:
+            found["robot"] = drivers[-1]
+        for row_id, (_, endpoint) in self.running.items():
+            found[row_id] = _with_clients(endpoint)
+        for row_id, (_, why) in self.failed.items():
+            found[row_id] = {"status": "error", "error": why}
+        return {"active": True, "endpoints": found}
+
+    async def _stats_asked(self, message: dict) -> None:
+        await self.agent.reply(message, self.stats())
+
+    async def _reload_asked(self, message: dict) -> None:
+        if self.router is not None:
+            await self.reload()
+        await self.agent.reply(message, self.stats())
+
+    async def close(self) -> None:
+        if self._ticker is not None:
+            self._ticker.cancel()
+            self._ticker = None
+        if self.router is not None:
+            await self.router.close()
+        self.router, self.vehicle, self.vehicle_spec = None, None, None
+        self.running.clear()
+        self.failed.clear()
+        self.links.clear()
+
+
+def _with_clients(endpoint: Endpoint) -> dict:
+    row = endpoint.as_dict()
+    if isinstance(endpoint, TcpServerEndpoint):
+        clients = [client.as_dict() for client in endpoint.clients]
+        row["clients"] = clients
+        for key in row["stats"]:
+            row["stats"][key] = sum(client["stats"][key] for client in clients)
+        for key in row["rates"]:
+            row["rates"][key] = round(sum(client["rates"][key] for client in clients), 1)
+        row["systems"] = [system for client in clients for system in client["systems"]]
+    return row
+
+
+def _rows_of(robot_name: str) -> dict[int, tuple[str, dict]]:
+    rows = GatewayEndpoint.objects.filter(robot__name=robot_name)
+    found = {}
+    for row in rows:
+        try:
+            found[row.pk] = (row.role, specs.check(row.spec()))
+        except ValueError:
+            found[row.pk] = (row.role, row.spec())  # fails to build: shown as its error
+    return found
+
+
+def seed_defaults(robot_name: str) -> None:
+    """A MAVLink robot's first endpoints: ground stations and programs (once: a user who
+    deletes them does not get them back)."""
+    robot = Robot.objects.get(name=robot_name)
+    if robot.gateway_seeded:
+        return
+    defaults = settings.GATEWAY_DEFAULTS
+    for role in ("gcs", "programs"):
+        spec = specs.check({"type": "udp", "mode": "server", "address": defaults[role]})
+        row = GatewayEndpoint(robot=robot, role=role)
+        row.set_spec(spec)
+        row.save()
+    Robot.objects.filter(pk=robot.pk).update(gateway_seeded=True)

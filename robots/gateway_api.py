@@ -1,0 +1,154 @@
+"""/api/robots/{name}/endpoints: a MAVLink robot's router endpoints, with their live stats.
+
+The vehicle link (the robot's URL) and the driver's own endpoint are listed with the ids
+``"vehicle"`` and ``"robot"``; they change with the robot's URL, not here. The rows are the
+robot's GatewayEndpoint records: kept in the database, applied by its agent at once.
+"""
+
+from __future__ import annotations
+
+from urllib.parse import urlsplit
+
+from django.http import HttpRequest
+from ninja import Field, Router, Schema
+from ninja.errors import HttpError
+from ninja.responses import Status
+from pydantic import model_validator
+
+from gateway import specs
+from programs.api import Error
+from robotide.schemas import Body
+from robots.bus import AgentUnavailable, ask_agent_sync
+from robots.models import GatewayEndpoint, Robot, get_robot_for_user
+
+gateway_router = Router(tags=["gateway"])
+
+STATS_TIMEOUT = 2.0
+
+
+class EndpointIn(Body):
+    type: str = Field(description="udp, tcp or serial", json_schema_extra={"enum": specs.TYPES})
+    mode: str | None = Field(None, description="server (listens) or client; udp and tcp")
+    address: str | None = Field(None, description="HOST:PORT; udp and tcp", max_length=200)
+    device: str | None = Field(None, description="serial device path", max_length=200)
+    baud: int | None = Field(None, description="serial speed, bit/s")
+    read_only: bool = False
+    allow: list[int] | None = Field(None, description="only these message ids pass")
+    block: list[int] = Field([], description="these message ids never pass")
+
+    @model_validator(mode="after")
+    def usable(self):
+        self.spec()
+        return self
+
+    def spec(self) -> dict:
+        return specs.check(self.model_dump(exclude_none=True))
+
+
+class EndpointOut(Schema):
+    id: int | str = Field(description='a row\'s number, or "vehicle" / "robot"')
+    role: str = Field(description="vehicle, robot, gcs, programs, or empty: added by a user")
+    type: str
+    mode: str | None = None
+    address: str | None = None
+    device: str | None = None
+    baud: int | None = None
+    read_only: bool = False
+    allow: list[int] | None = None
+    block: list[int] = []
+    status: str = Field(description="up, connecting, down, error, or unknown (agent away)")
+    error: str = ""
+    bound: str | None = Field(None, description="the address a server listens on")
+    stats: dict = Field({}, description="counts: frames and bytes in and out, drops, errors")
+    rates: dict = Field({}, description="the same per second, over the last second")
+    systems: list[dict] = Field([], description="MAVLink systems heard here, seconds ago")
+    peers: list[str] | None = None
+    clients: list[dict] | None = None
+
+
+LIVE_KEYS = ("status", "error", "bound", "stats", "rates", "systems", "peers", "clients")
+
+
+def _mavlink_robot(request: HttpRequest, name: str, change: bool = False) -> Robot:
+    robot = get_robot_for_user(request.user, name)
+    if change and not robot.configurable_by(request.user):
+        raise HttpError(403, "Only the robot's owner or staff change its endpoints.")
+    if urlsplit(robot.url).scheme not in MAVLINK_SCHEMES:
+        raise HttpError(409, f"Robot {name!r} is not a MAVLink robot: it has no router.")
+    return robot
+
+
+MAVLINK_SCHEMES = ("mavlink", "mavlink+tcp", "mavlink+udp")
+
+
+def _live(robot: Robot, kind: str = "gateway.stats") -> dict | None:
+    try:
+        reply = ask_agent_sync(robot.name, kind, timeout=STATS_TIMEOUT)
+    except AgentUnavailable:
+        return None
+    return {str(key): value for key, value in reply.get("endpoints", {}).items()}
+
+
+def _out(key, role: str, spec: dict, live: dict | None) -> dict:
+    row = {"id": key, "role": role, **spec}
+    if live is None:
+        return {**row, "status": "unknown", "error": "the robot's agent is not answering"}
+    found = live.get(str(key))
+    if found is None:
+        return {**row, "status": "down", "error": "not started"}
+    return {**row, **{k: found[k] for k in LIVE_KEYS if k in found}}
+
+
+def _listing(robot: Robot, live: dict | None) -> list[dict]:
+    rows = []
+    if live is not None:
+        vehicle = live.get("vehicle", {})
+        rows.append(_out("vehicle", "vehicle", vehicle.get("spec") or {"type": "?"}, live))
+        if "robot" in live:
+            rows.append(_out("robot", "robot", {"type": "local"}, live))
+    for endpoint in robot.endpoints.all():
+        rows.append(_out(endpoint.pk, endpoint.role, endpoint.spec(), live))
+    return rows
+
+
+@gateway_router.get("/{name}/endpoints", response={200: list[EndpointOut], 409: Error})
+def list_endpoints(request, name: str):
+    """Every endpoint of the robot's router, with its live stats."""
+    robot = _mavlink_robot(request, name)
+    return _listing(robot, _live(robot))
+
+
+@gateway_router.post("/{name}/endpoints", response={201: EndpointOut, 409: Error})
+def add_endpoint(request, name: str, data: EndpointIn):
+    """Add an endpoint; it starts at once. One that cannot (its address in use, no such host)
+    is kept with its error, and the others route on."""
+    robot = _mavlink_robot(request, name, change=True)
+    endpoint = GatewayEndpoint(robot=robot)
+    endpoint.set_spec(data.spec())
+    endpoint.save()
+    return Status(201, _out(endpoint.pk, "", endpoint.spec(), _live(robot, "gateway.reload")))
+
+
+@gateway_router.put("/{name}/endpoints/{int:endpoint_id}", response={200: EndpointOut, 409: Error})
+def change_endpoint(request, name: str, endpoint_id: int, data: EndpointIn):
+    """Replace an endpoint's description; the router restarts it so."""
+    robot = _mavlink_robot(request, name, change=True)
+    endpoint = _row(robot, endpoint_id)
+    endpoint.set_spec(data.spec())
+    endpoint.save()
+    return _out(endpoint.pk, endpoint.role, endpoint.spec(), _live(robot, "gateway.reload"))
+
+
+@gateway_router.delete("/{name}/endpoints/{int:endpoint_id}", response={204: None, 409: Error})
+def delete_endpoint(request, name: str, endpoint_id: int):
+    robot = _mavlink_robot(request, name, change=True)
+    _row(robot, endpoint_id).delete()
+    _live(robot, "gateway.reload")
+    return Status(204, None)
+
+
+def _row(robot: Robot, endpoint_id: int) -> GatewayEndpoint:
+    try:
+        return robot.endpoints.get(pk=endpoint_id)
+    except GatewayEndpoint.DoesNotExist:
+        raise HttpError(404, f"Robot {robot.name!r} has no endpoint {endpoint_id}.") from None

@@ -1,0 +1,58 @@
+"""``robot_on(kind)``: a real robot agent in this process, on the in-memory channel layer, on
+the robot of that kind behind its peer (tests/peers.py); all torn down after the test."""
+
+import asyncio
+import contextlib
+
+import pytest
+from channels.db import database_sync_to_async
+from channels.layers import get_channel_layer
+from django.contrib.auth.models import User
+
+from robots.agent import RobotAgent
+from robots.models import Robot
+from tests.e2e.agents import until
+from tests.peers import start_peer
+
+
+@pytest.fixture
+async def robot_on(tmp_path):
+    """``await robot_on(kind)`` -> (peer, agent, robot row, user), all torn down after.
+    ``await robot_on.restart(kind)`` -> a new agent for that robot, the old one stopped."""
+    started = []
+    agents = {}
+
+    # Messages other tests left on the in-memory layer (a run.start for "run 1" of another
+    # database) must not reach this test's agent.
+    await get_channel_layer().flush()
+
+    async def start(kind):
+        peer = await start_peer(kind, tmp_path)
+        robot = await database_sync_to_async(Robot.objects.create)(name=kind, url=peer.url)
+        started.append(peer)
+        agent = await serve(kind)
+        user = await database_sync_to_async(User.objects.create_user)(f"student-{kind}")
+        return peer, agent, robot, user
+
+    async def serve(kind):
+        agent = RobotAgent(kind)
+        agents[kind] = (agent, asyncio.create_task(agent.serve()))
+        await asyncio.wait_for(agent.ready.wait(), 15)
+        await until(lambda: agent.driver.is_open, what=f"{kind} robot open")
+        return agent
+
+    async def restart(kind):
+        await stop(agents.pop(kind)[1])
+        return await serve(kind)
+
+    async def stop(task):
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+
+    start.restart = restart
+    yield start
+    for _, task in agents.values():
+        await stop(task)
+    for peer in started:
+        await peer.stop()
