@@ -16,7 +16,10 @@ robotide user add NAME [--staff] [--group G] [--password-stdin]
 robotide route VEHICLE --to ENDPOINT [--to ...]
                                  the MAVLink router alone, no web application: VEHICLE is
                                  DEVICE[:BAUD], udp:HOST:PORT (listened on) or tcp:HOST:PORT;
-                                 each ENDPOINT udp:HOST:PORT (sent to), udpin:, tcp: or tcpin:
+                                 each ENDPOINT udp:HOST:PORT (sent to), udpin:, tcp: or tcpin:;
+                                 --tlog FILE records every routed frame there
+robotide replay FILE --to ENDPOINT [--to ...] [--speed X | --fast] [--loop]
+                                 a .tlog's frames sent to the endpoints, with their timing
 robotide manage ...              Django's manage.py commands
 """
 
@@ -88,6 +91,18 @@ def main(argv: list[str] | None = None) -> int:
     )  # fmt: skip
     route.add_argument("--baud", type=int, default=115200, help="when VEHICLE names none")
     route.add_argument("--stats", type=float, default=0, help="print stats every N s")
+    route.add_argument("--tlog", metavar="FILE", help="record every routed frame to this .tlog")
+    replay = commands.add_parser("replay", help="send a .tlog's frames to MAVLink endpoints")
+    replay.add_argument("file", help="the .tlog")
+    replay.add_argument(
+        "--to", action="append", required=True, metavar="ENDPOINT",
+        help="udp:HOST:PORT (client), udpin:HOST:PORT, tcp:HOST:PORT, tcpin:HOST:PORT",
+    )  # fmt: skip
+    replay.add_argument("--speed", type=float, default=1.0, help="times the recorded rate; 0: "
+                        "as fast as the endpoints take them")  # fmt: skip
+    replay.add_argument("--fast", action="store_const", const=0.0, dest="speed",
+                        help="the same as --speed 0")  # fmt: skip
+    replay.add_argument("--loop", action="store_true", help="from the start again at the end")
     commands.add_parser("manage", help="Django management commands", add_help=False)
     args, rest = parser.parse_known_args(argv)
     if args.command == "robots":
@@ -98,6 +113,10 @@ def main(argv: list[str] | None = None) -> int:
         if rest:
             parser.error(f"unrecognized arguments: {' '.join(rest)}")
         return cmd_route(args)
+    if args.command == "replay":
+        if rest:
+            parser.error(f"unrecognized arguments: {' '.join(rest)}")
+        return cmd_replay(args)
     if args.command != "manage" and rest:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
     # What the server writes is its own; run accounts get only what is opened to them.
@@ -140,9 +159,21 @@ def cmd_route(args) -> int:
     except ValueError as exc:
         print(f"robotide route: {exc}", file=sys.stderr)
         return 2
+    recorder = None
+    if args.tlog:
+        from gateway.tlog import TlogRecorder
+
+        recorder = TlogRecorder(args.tlog)
+        try:
+            recorder.start()
+        except OSError as exc:
+            print(f"robotide route: cannot write {args.tlog}: {exc.strerror}", file=sys.stderr)
+            return 2
 
     async def run() -> int:
         router = Router()
+        if recorder:
+            router.taps.append(recorder)
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGTERM, signal.SIGINT):
@@ -160,11 +191,54 @@ def cmd_route(args) -> int:
                 if args.stats:
                     for row in router.stats():
                         print(json.dumps(row), file=sys.stderr)
+                    if recorder:
+                        print(json.dumps({"tlog": recorder.as_dict()}), file=sys.stderr)
         finally:
             await router.close()
+            if recorder:
+                await asyncio.to_thread(recorder.close)
         return 0
 
     return asyncio.run(run())
+
+
+def cmd_replay(args) -> int:
+    """No Django: a .tlog to endpoints, until its end (or with --loop, SIGTERM or SIGINT)."""
+    import time
+
+    from gateway.router import endpoint_from_spec
+    from gateway.tlog import check_tlog, replay
+
+    if args.speed < 0:
+        print("robotide replay: --speed must be 0 or more", file=sys.stderr)
+        return 2
+    try:
+        check_tlog(args.file)
+        endpoints = [endpoint_from_spec(spec) for spec in args.to]
+    except OSError as exc:
+        print(f"robotide replay: cannot read {args.file}: {exc.strerror}", file=sys.stderr)
+        return 2
+    except ValueError as exc:
+        print(f"robotide replay: {exc}", file=sys.stderr)
+        return 2
+
+    async def run() -> int:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(sig, stop.set)
+        return await replay(args.file, endpoints, speed=args.speed, loop=args.loop, stop=stop)
+
+    began = time.monotonic()
+    try:
+        frames = asyncio.run(run())
+    except (OSError, ValueError) as exc:
+        print(f"robotide replay: {exc}", file=sys.stderr)
+        return 2
+    drops = sum(endpoint.stats.drops for endpoint in endpoints)
+    dropped = f", {drops} not sent (an endpoint down or behind)" if drops else ""
+    print(f"replayed {frames} frames in {time.monotonic() - began:.1f} s{dropped}")
+    return 0
 
 
 def cmd_up(args, rest) -> int:
