@@ -11,6 +11,7 @@ from __future__ import annotations
 import abc
 import math
 import numbers
+from collections.abc import Callable
 from typing import Any
 
 from rhal.errors import NotSupportedError, RobotConnectionError
@@ -35,10 +36,24 @@ class Robot(abc.ABC):
         self.max_linear = _positive_limit("max_linear", max_linear)
         self.max_angular = _positive_limit("max_angular", max_angular)
         self._is_open = False
+        #: called with the bytes the driver reads off its wire (a serial bridge's watchers);
+        #: drivers whose bytes are theirs to read call them, others leave the list unused
+        self.wire_taps: list[Callable[[bytes], None]] = []
 
     def __repr__(self) -> str:
         state = "open" if self._is_open else "closed"
         return f"<{type(self).__name__} {self.url!r} {state}>"
+
+    @property
+    def wire_device(self) -> str | None:
+        """The serial device this robot's driver holds, if it holds one and its wire taps see
+        what it reads; None otherwise."""
+        return None
+
+    def tap_wire(self, feed: Callable[[bytes], None]) -> Callable[[], None]:
+        """Have ``feed`` called with what the driver reads; returns the unsubscribe."""
+        self.wire_taps.append(feed)
+        return lambda: self.wire_taps.remove(feed) if feed in self.wire_taps else None
 
     @property
     def is_open(self) -> bool:

@@ -100,6 +100,10 @@ class PioneerRobot(Robot):
     def connected(self) -> bool:
         return self._link is not None
 
+    @property
+    def wire_device(self) -> str | None:
+        return self.device
+
     # -- hooks -----------------------------------------------------------------------------
 
     async def _open(self) -> None:
@@ -187,7 +191,7 @@ class PioneerRobot(Robot):
             reader, writer = await serial_asyncio.open_serial_connection(
                 url=self.device, baudrate=self.baud
             )
-        link = _Link(reader, writer, self._parser)
+        link = _Link(reader, writer, self._parser, self.wire_taps)
         deadline = 3 * self.timeout
         try:
             async with asyncio.timeout(deadline):
@@ -327,8 +331,10 @@ class _Link:
         reader: asyncio.StreamReader,
         writer: asyncio.StreamWriter,
         parser: arcos.PacketParser,
+        taps: list | None = None,
     ) -> None:
         self._reader, self._writer, self._parser = reader, writer, parser
+        self._taps = taps if taps is not None else []
         self._pending: deque[bytes] = deque()
         parser.reset()
 
@@ -339,6 +345,8 @@ class _Link:
                 data = await self._reader.read(4096)
             if not data:
                 raise ConnectionResetError("the robot closed the link")
+            for tap in self._taps:
+                tap(data)
             self._pending.extend(self._parser.feed(data))
         return self._pending.popleft()
 

@@ -16,6 +16,7 @@ from programs.shares_api import groups_router, shares_router
 from robotide.models import ApiToken
 from robotide.tokens_api import tokens_router
 from robots.api import robots_router
+from robots.bridges_api import bridges_router
 from robots.bus import AgentUnavailable
 from robots.gateway_api import gateway_router
 
@@ -94,6 +95,7 @@ api.add_router("/programs", programs_router)
 api.add_router("/runs", runs_router)
 api.add_router("/robots", robots_router)
 api.add_router("/robots", gateway_router)
+api.add_router("/robots", bridges_router)
 api.add_router("/programs", shares_router)
 api.add_router("/groups", groups_router)
 api.add_router("/tokens", tokens_router)

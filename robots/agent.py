@@ -42,6 +42,7 @@ from programs.models import Run
 from programs.supervisor import RunProcess
 from programs.watch import RunWatch, signal_account
 from robots import rpc
+from robots.bridges import Bridges
 from robots.bus import MANAGER_CHANNEL, RUNS_GROUP, run_group
 from robots.camera import CameraHub
 from robots.gateway import Gateway
@@ -104,6 +105,9 @@ class RobotAgent:
         self.handlers.update(self.camera.handlers)
         self.gateway = Gateway(self)
         self.handlers.update(self.gateway.handlers)
+        self.bridges = Bridges(self)
+        self.handlers.update(self.bridges.handlers)
+        self.lent_to: str | None = None  # a serial bridge client has the robot's device
         self._outbox: asyncio.Queue = asyncio.Queue()
         self._tasks: list[asyncio.Task] = []
         self._starting: set[asyncio.Task] = set()
@@ -128,6 +132,7 @@ class RobotAgent:
         for run_id in lost:
             end_leftovers(run_id)
             self.publish(run_group(run_id), {"type": "run.state", "run_id": run_id})
+        await self.bridges.reload()
         self.api_address = await self.server.start()
         # Run accounts reach the socket; the token, not the file mode, decides who is served.
         self.socket_dir.chmod(0o711)
@@ -178,12 +183,29 @@ class RobotAgent:
             driver = self.driver
             if driver.is_open:
                 return True
+            if self.lent_to is not None:
+                return False
             try:
                 await driver.open()
             except rhal.RhalError as exc:
                 return self._open_failed(exc)
         self.link_error = None
         return True
+
+    async def lend_driver(self, to: str) -> None:
+        """A serial bridge client takes the robot's device: the driver lets go of it."""
+        self.lent_to = to
+        async with self._opening:
+            try:
+                await self.driver.close()  # stops the motors first
+            except Exception:  # a robot already gone: its device is free all the same
+                log.exception("agent %s: closing the robot for the bridge failed", self.name)
+        self.link_error = f"the robot's serial port is lent to {to}"
+
+    async def take_driver_back(self) -> None:
+        self.lent_to = None
+        self.link_error = None
+        await self.open_robot()
 
     def _open_failed(self, exc: rhal.RhalError) -> bool:
         if str(exc) != self.link_error:
@@ -220,6 +242,8 @@ class RobotAgent:
                 log.exception("agent %s: closing the robot failed", self.name)
         with contextlib.suppress(Exception):
             await self.gateway.close()  # after the driver: it disarms through the router
+        with contextlib.suppress(Exception):
+            await self.bridges.close()
         for task in self._tasks:
             task.cancel()
         # Deliver what is queued (the final run states) before going away.

@@ -22,13 +22,15 @@ class LeaseHeld(Exception):
 
 @dataclass(frozen=True)
 class Holder:
-    kind: str  # "run" or "teleop"
-    key: int | str  # the run id, or the browser's channel name
+    kind: str  # "run", "teleop" or "bridge"
+    key: int | str  # the run id, the browser's channel name, or "bridge HOST:PORT"
     user: str
 
     def describe(self) -> str:
         if self.kind == "run":
             return f"{self.user}'s program (run #{self.key})"
+        if self.kind == "bridge":
+            return f"a serial bridge client at {self.user}"
         return f"{self.user}, driving by hand"
 
     def as_dict(self) -> dict:

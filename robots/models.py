@@ -138,6 +138,33 @@ class GatewayEndpoint(models.Model):
         self.read_only, self.allow, self.block = spec["read_only"], spec["allow"], spec["block"]
 
 
+class SerialBridge(models.Model):
+    """A serial device of the robot shared over TCP, raw or RFC 2217 (gateway.serial_bridge)."""
+
+    robot = models.ForeignKey(Robot, on_delete=models.CASCADE, related_name="bridges")
+    device = models.CharField(
+        max_length=200, blank=True, help_text="Serial device path; empty: the robot's own"
+    )
+    baud = models.PositiveIntegerField(default=9600)
+    address = models.CharField(max_length=200, help_text="HOST:PORT the bridge listens on")
+    protocol = models.CharField(
+        max_length=10, default="raw", choices=[("raw", "raw bytes"), ("rfc2217", "RFC 2217")]
+    )
+    when_busy = models.CharField(
+        max_length=10,
+        default="read_only",
+        choices=[("read_only", "watch read-only"), ("refuse", "refuse")],
+        help_text="A client that comes while a program drives the robot",
+    )
+    created = models.DateTimeField(default=timezone.now, editable=False)
+
+    class Meta:
+        ordering = ["robot", "id"]
+
+    def __str__(self) -> str:
+        return f"{self.robot.name}: {self.device or 'its serial port'} on {self.address}"
+
+
 def agent_channel(name: str) -> str:
     return f"agent.{name}"
 
