@@ -93,7 +93,11 @@ def _out(row: SerialBridge, live: dict | None) -> dict:
 
 @bridges_router.get("/{name}/bridges", response=list[BridgeOut])
 def list_bridges(request, name: str):
-    robot = _robot(request, name)
+    return bridge_rows(_robot(request, name))
+
+
+def bridge_rows(robot: Robot) -> list[dict]:
+    """The robot's serial bridges as the API lists them, with the agent's live view."""
     live = _live(robot)
     return [_out(row, live) for row in robot.bridges.all()]
 

@@ -69,16 +69,20 @@ class EndpointOut(Schema):
 LIVE_KEYS = ("status", "error", "bound", "stats", "rates", "systems", "peers", "clients")
 
 
+MAVLINK_SCHEMES = ("mavlink", "mavlink+tcp", "mavlink+udp")
+
+
+def has_router(robot: Robot) -> bool:
+    return urlsplit(robot.url).scheme in MAVLINK_SCHEMES
+
+
 def _mavlink_robot(request: HttpRequest, name: str, change: bool = False) -> Robot:
     robot = get_robot_for_user(request.user, name)
     if change and not robot.configurable_by(request.user):
         raise HttpError(403, "Only the robot's owner or staff change its endpoints.")
-    if urlsplit(robot.url).scheme not in MAVLINK_SCHEMES:
+    if not has_router(robot):
         raise HttpError(409, f"Robot {name!r} is not a MAVLink robot: it has no router.")
     return robot
-
-
-MAVLINK_SCHEMES = ("mavlink", "mavlink+tcp", "mavlink+udp")
 
 
 def _live(robot: Robot, kind: str = "gateway.stats") -> dict | None:
@@ -99,7 +103,9 @@ def _out(key, role: str, spec: dict, live: dict | None) -> dict:
     return {**row, **{k: found[k] for k in LIVE_KEYS if k in found}}
 
 
-def _listing(robot: Robot, live: dict | None) -> list[dict]:
+def endpoint_rows(robot: Robot, live: dict | None = None) -> list[dict]:
+    """The robot's endpoints as the API lists them; ``live``: the agent's stats (asked if None)."""
+    live = live if live is not None else _live(robot)
     rows = []
     if live is not None:
         vehicle = live.get("vehicle", {})
@@ -115,7 +121,7 @@ def _listing(robot: Robot, live: dict | None) -> list[dict]:
 def list_endpoints(request, name: str):
     """Every endpoint of the robot's router, with its live stats."""
     robot = _mavlink_robot(request, name)
-    return _listing(robot, _live(robot))
+    return endpoint_rows(robot)
 
 
 @gateway_router.post("/{name}/endpoints", response={201: EndpointOut, 409: Error})
@@ -123,10 +129,15 @@ def add_endpoint(request, name: str, data: EndpointIn):
     """Add an endpoint; it starts at once. One that cannot (its address in use, no such host)
     is kept with its error, and the others route on."""
     robot = _mavlink_robot(request, name, change=True)
+    return Status(201, add_endpoint_row(robot, data.spec()))
+
+
+def add_endpoint_row(robot: Robot, spec: dict) -> dict:
+    """Keep the endpoint (a spec gateway.specs.check cleaned) and have the agent start it."""
     endpoint = GatewayEndpoint(robot=robot)
-    endpoint.set_spec(data.spec())
+    endpoint.set_spec(spec)
     endpoint.save()
-    return Status(201, _out(endpoint.pk, "", endpoint.spec(), _live(robot, "gateway.reload")))
+    return _out(endpoint.pk, "", endpoint.spec(), _live(robot, "gateway.reload"))
 
 
 @gateway_router.put("/{name}/endpoints/{int:endpoint_id}", response={200: EndpointOut, 409: Error})
@@ -142,9 +153,13 @@ def change_endpoint(request, name: str, endpoint_id: int, data: EndpointIn):
 @gateway_router.delete("/{name}/endpoints/{int:endpoint_id}", response={204: None, 409: Error})
 def delete_endpoint(request, name: str, endpoint_id: int):
     robot = _mavlink_robot(request, name, change=True)
+    delete_endpoint_row(robot, endpoint_id)
+    return Status(204, None)
+
+
+def delete_endpoint_row(robot: Robot, endpoint_id: int) -> None:
     _row(robot, endpoint_id).delete()
     _live(robot, "gateway.reload")
-    return Status(204, None)
 
 
 def _row(robot: Robot, endpoint_id: int) -> GatewayEndpoint:
