@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import time
 
 from channels.db import database_sync_to_async
 from django.conf import settings
@@ -18,6 +19,7 @@ from django.conf import settings
 from gateway import specs
 from gateway.local import RouterLink, open_local_link
 from gateway.router import Endpoint, Router, TcpServerEndpoint
+from gateway.tlog import TlogRecorder
 from robots.models import GatewayEndpoint, Robot
 
 log = logging.getLogger(__name__)
@@ -38,7 +40,12 @@ class Gateway:
         self.links: set[RouterLink] = set()
         self._ticker: asyncio.Task | None = None
         self._applying = asyncio.Lock()
-        self.handlers = {"gateway.stats": self._stats_asked, "gateway.reload": self._reload_asked}
+        self.recorder: TlogRecorder | None = None
+        self.handlers = {
+            "gateway.stats": self._stats_asked,
+            "gateway.reload": self._reload_asked,
+            "gateway.record": self._record_asked,
+        }
 
     # -- the driver --------------------------------------------------------------------------
 
@@ -141,7 +148,7 @@ class Gateway:
 
     def stats(self) -> dict:
         if self.router is None:
-            return {"active": False, "endpoints": {}}
+            return {"active": False, "endpoints": {}, "recording": None}
         found: dict = {}
         if self.vehicle is not None:
             found["vehicle"] = self.vehicle.as_dict()
@@ -155,7 +162,8 @@ class Gateway:
             found[row_id] = _with_clients(endpoint)
         for row_id, (_, why) in self.failed.items():
             found[row_id] = {"status": "error", "error": why}
-        return {"active": True, "endpoints": found}
+        recording = self.recorder.as_dict() if self.recorder else None
+        return {"active": True, "endpoints": found, "recording": recording}
 
     async def _stats_asked(self, message: dict) -> None:
         await self.agent.reply(message, self.stats())
@@ -165,7 +173,34 @@ class Gateway:
             await self.reload()
         await self.agent.reply(message, self.stats())
 
+    # -- recording ------------------------------------------------------------------------------
+
+    async def record(self, on: bool) -> None:
+        """Start writing every routed frame to a new .tlog in recordings_dir(), or stop."""
+        if on and self.recorder is None and self.router is not None:
+            folder = recordings_dir(self.agent.name)
+            folder.mkdir(parents=True, exist_ok=True)
+            stamp = time.strftime("%Y%m%d-%H%M%S")
+            recorder = TlogRecorder(folder / f"{self.agent.name}-{stamp}.tlog")
+            await asyncio.to_thread(recorder.start)
+            self.router.taps.append(recorder)
+            self.recorder = recorder
+        elif not on and self.recorder is not None:
+            recorder, self.recorder = self.recorder, None
+            with contextlib.suppress(ValueError):
+                self.router.taps.remove(recorder)
+            await asyncio.to_thread(recorder.close)  # a slow disk must not hold the loop
+
+    async def _record_asked(self, message: dict) -> None:
+        try:
+            await self.record(bool(message.get("on")))
+        except OSError as exc:
+            await self.agent.reply(message, {"error": f"cannot record: {exc}"})
+            return
+        await self.agent.reply(message, self.stats())
+
     async def close(self) -> None:
+        await self.record(False)
         if self._ticker is not None:
             self._ticker.cancel()
             self._ticker = None
@@ -175,6 +210,10 @@ class Gateway:
         self.running.clear()
         self.failed.clear()
         self.links.clear()
+
+
+def recordings_dir(robot_name: str):
+    return settings.DATA_DIR / "recordings" / robot_name
 
 
 def _with_clients(endpoint: Endpoint) -> dict:

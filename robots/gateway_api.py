@@ -7,9 +7,11 @@ robot's GatewayEndpoint records: kept in the database, applied by its agent at o
 
 from __future__ import annotations
 
+import re
+from datetime import UTC, datetime
 from urllib.parse import urlsplit
 
-from django.http import HttpRequest
+from django.http import FileResponse, HttpRequest
 from ninja import Field, Router, Schema
 from ninja.errors import HttpError
 from ninja.responses import Status
@@ -19,6 +21,7 @@ from gateway import specs
 from programs.api import Error
 from robotide.schemas import Body
 from robots.bus import AgentUnavailable, ask_agent_sync
+from robots.gateway import recordings_dir
 from robots.models import GatewayEndpoint, Robot, get_robot_for_user
 
 gateway_router = Router(tags=["gateway"])
@@ -167,3 +170,70 @@ def _row(robot: Robot, endpoint_id: int) -> GatewayEndpoint:
         return robot.endpoints.get(pk=endpoint_id)
     except GatewayEndpoint.DoesNotExist:
         raise HttpError(404, f"Robot {robot.name!r} has no endpoint {endpoint_id}.") from None
+
+
+# -- recordings ---------------------------------------------------------------------------
+
+TLOG_NAME = re.compile(r"^[\w.-]+\.tlog$")
+
+
+class RecordIn(Body):
+    on: bool = Field(description="true: start a new .tlog of every routed frame; false: stop")
+
+
+class RecordingFile(Schema):
+    name: str
+    bytes: int
+    modified: datetime
+
+
+class Recordings(Schema):
+    current: dict | None = Field(None, description="the recording under way: path, frames...")
+    files: list[RecordingFile]
+
+
+def _recordings(robot: Robot, current: dict | None) -> dict:
+    folder = recordings_dir(robot.name)
+    files = sorted(folder.glob("*.tlog"), reverse=True) if folder.is_dir() else []
+    listed = [
+        {"name": f.name, "bytes": f.stat().st_size,
+         "modified": datetime.fromtimestamp(f.stat().st_mtime, tz=UTC)}
+        for f in files
+    ]  # fmt: skip
+    return {"current": current, "files": listed}
+
+
+@gateway_router.get("/{name}/recordings", response={200: Recordings, 409: Error})
+def list_recordings(request, name: str):
+    """The robot's .tlog recordings (kept where its agent runs), and the one under way."""
+    robot = _mavlink_robot(request, name)
+    try:
+        current = ask_agent_sync(robot.name, "gateway.stats", timeout=STATS_TIMEOUT)["recording"]
+    except AgentUnavailable:
+        current = None
+    return _recordings(robot, current)
+
+
+@gateway_router.post("/{name}/recordings", response={200: Recordings, 409: Error, 503: Error})
+def record(request, name: str, data: RecordIn):
+    """Start or stop recording every frame the robot's router routes."""
+    robot = _mavlink_robot(request, name, change=True)
+    reply = ask_agent_sync(robot.name, "gateway.record", timeout=STATS_TIMEOUT, on=data.on)
+    return _recordings(robot, reply["recording"])
+
+
+@gateway_router.get(
+    "/{name}/recordings/{file}",
+    response={200: None, 409: Error},
+    openapi_extra={"responses": {"200": {
+        "description": "the .tlog",
+        "content": {"application/octet-stream": {"schema": {"type": "string", "format": "binary"}}},
+    }}},
+)  # fmt: skip
+def download_recording(request, name: str, file: str):
+    robot = _mavlink_robot(request, name)
+    path = recordings_dir(robot.name) / file
+    if not TLOG_NAME.match(file) or not path.is_file():
+        raise HttpError(404, f"Robot {robot.name!r} has no recording {file!r}.")
+    return FileResponse(path.open("rb"), as_attachment=True, filename=file,
+                        content_type="application/octet-stream")  # fmt: skip

@@ -93,9 +93,7 @@ async def test_driver_ground_station_and_program_share_the_vehicle(robot_on):
     )
 
 
-async def test_endpoints_through_the_api_route_at_once_and_survive_a_restart(
-    robot_on, monkeypatch
-):
+async def test_endpoints_through_the_api_route_at_once_and_survive_a_restart(robot_on, monkeypatch):
     # Views ask the agent on this loop from their worker thread, as in the server.
     monkeypatch.setattr("robots.bus._server_loop", asyncio.get_running_loop())
     peer, agent, robot, user = await robot_on("mavlink")
@@ -160,3 +158,39 @@ async def test_endpoints_through_the_api_route_at_once_and_survive_a_restart(
             await asyncio.to_thread(listening.recv, 65536)
     taken.close()
     listening.close()
+
+
+async def test_a_recording_of_the_vehicle_link_is_kept_and_downloaded(
+    robot_on, monkeypatch, tmp_path, settings
+):
+    settings.DATA_DIR = tmp_path
+    monkeypatch.setattr("robots.bus._server_loop", asyncio.get_running_loop())
+    peer, agent, robot, user = await robot_on("mavlink")
+    await database_sync_to_async(robot.__class__.objects.filter(pk=robot.pk).update)(owner=user)
+    client = Client()
+    await sync_to_async(client.force_login)(user)
+    api = f"/api/robots/{robot.name}/recordings"
+
+    def post(on):
+        return client.post(api, json.dumps({"on": on}), content_type="application/json").json()
+
+    post_off_thread = sync_to_async(post, thread_sensitive=False)
+    started = await post_off_thread(True)
+    assert started["current"]["frames"] == 0 and started["current"]["error"] == ""
+    await asyncio.sleep(2.5)  # heartbeats come once a second
+    stopped = await post_off_thread(False)
+    assert stopped["current"] is None and len(stopped["files"]) == 1
+    name = stopped["files"][0]["name"]
+    download = await sync_to_async(client.get, thread_sensitive=False)(f"{api}/{name}")
+    assert download.status_code == 200
+    path = tmp_path / "downloaded.tlog"
+    path.write_bytes(b"".join(download.streaming_content))
+    log = mavutil.mavlink_connection(str(path))
+    kinds = set()
+    while (message := log.recv_match()) is not None:
+        kinds.add((message.get_srcSystem(), message.get_type()))
+    # Both ways: the vehicle's telemetry and the driver's own heartbeats.
+    assert (1, "HEARTBEAT") in kinds and (1, "ATTITUDE") in kinds
+    assert (agent.driver.sysid, "HEARTBEAT") in kinds
+    missing = await sync_to_async(client.get, thread_sensitive=False)(f"{api}/..%2Fx.tlog")
+    assert missing.status_code == 404
