@@ -1,10 +1,11 @@
 from django import forms
 from django.contrib import admin
 
-from robots.bus import announce_robot_sync, reconfigure_sync
+from gateway import specs
+from robots.bus import announce_robot_sync, reconfigure_sync, tell_agent_sync
 from robots.driver_settings import current_values, option_field
 from robots.forms import RobotConfigForm
-from robots.models import RUN_SETTINGS, Robot
+from robots.models import RUN_SETTINGS, GatewayEndpoint, Robot, SerialBridge
 
 
 class RobotAdminForm(RobotConfigForm):
@@ -32,6 +33,37 @@ class RobotAdminForm(RobotConfigForm):
         return super()._run_settings()
 
 
+class EndpointForm(forms.ModelForm):
+    class Meta:
+        model = GatewayEndpoint
+        fields = ["type", "mode", "address", "device", "baud", "read_only", "allow", "block"]
+
+    def clean(self):
+        data = super().clean()
+        spec = {k: v for k, v in data.items() if v not in (None, "") and k != "robot"}
+        spec["block"] = data.get("block") or []
+        try:
+            clean = specs.check(spec)
+        except ValueError as exc:
+            raise forms.ValidationError(str(exc)) from None
+        self.instance.set_spec(clean)
+        return data
+
+
+class EndpointInline(admin.TabularInline):
+    model = GatewayEndpoint
+    form = EndpointForm
+    extra = 0
+    readonly_fields = ["role"]
+    verbose_name = "MAVLink gateway endpoint"
+
+
+class BridgeInline(admin.TabularInline):
+    model = SerialBridge
+    extra = 0
+    verbose_name = "serial bridge"
+
+
 @admin.register(Robot)
 class RobotAdmin(admin.ModelAdmin):
     form = RobotAdminForm
@@ -40,6 +72,7 @@ class RobotAdmin(admin.ModelAdmin):
     search_fields = ["name", "url", "description"]
     list_filter = ["groups"]
     filter_horizontal = ["groups"]
+    inlines = [EndpointInline, BridgeInline]
 
     def get_form(self, request, obj=None, change=False, **kwargs):
         # The admin lays out the fields a form class declares: declare this robot's options.
@@ -57,3 +90,9 @@ class RobotAdmin(admin.ModelAdmin):
             reconfigure_sync(obj.name)
         else:
             announce_robot_sync(obj.name)
+
+    def save_related(self, request, form, formsets, change):
+        super().save_related(request, form, formsets, change)
+        if change:  # the agent applies the rows as they are now
+            tell_agent_sync(form.instance.name, "gateway.reload")
+            tell_agent_sync(form.instance.name, "bridges.reload")

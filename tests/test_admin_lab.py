@@ -197,6 +197,49 @@ def test_the_robot_admin_edits_its_classes(client, lab):
             if value is not None and value is not False:
                 data[name] = value
     data = {k: v for k, v in data.items() if k in form.fields or k == "groups"}
+    data.update(no_inline_rows())
     response = client.post(f"/admin/robots/robot/{robot.pk}/change/", data)
     assert response.status_code == 302, response.context["adminform"].form.errors
     assert list(robot.groups.all()) == [lab["klass"]]
+
+
+def no_inline_rows(**rows) -> dict:
+    """The admin's inline formsets (gateway endpoints, serial bridges): none, or one each."""
+    data = {}
+    for prefix in ("endpoints", "bridges"):
+        given = rows.get(prefix, {})
+        data.update({f"{prefix}-TOTAL_FORMS": "1" if given else "0",
+                     f"{prefix}-INITIAL_FORMS": "0"})  # fmt: skip
+        data.update({f"{prefix}-0-{k}": v for k, v in given.items()})
+    return data
+
+
+def test_the_robot_admin_adds_gateway_endpoints_checked_as_the_api_checks_them(client, lab):
+    robot = lab["robot"]
+    robot.url = "mavlink+udp://127.0.0.1:14555"
+    robot.save()
+    page = client.get(f"/admin/robots/robot/{robot.pk}/change/")
+    assert "MAVLink gateway endpoint" in page.text
+    form = page.context["adminform"].form
+    base = {k: v for k, v in form.initial.items() if v is not None and k in form.fields}
+    base.update(run_settings="{}", groups=[])
+    for name, field in form.fields.items():
+        if name.startswith("option_") and name not in base:
+            value = form.initial.get(name, field.initial)
+            if value is not None and value is not False:
+                base[name] = value
+    bad = {"type": "udp", "mode": "server", "address": "nowhere", "block": "[]"}
+    response = client.post(
+        f"/admin/robots/robot/{robot.pk}/change/", {**base, **no_inline_rows(endpoints=bad)}
+    )
+    assert response.status_code == 200 and "not HOST:PORT" in response.text
+    good = {**bad, "address": "127.0.0.1:14560", "allow": "[0, 76]", "read_only": "on"}
+    response = client.post(
+        f"/admin/robots/robot/{robot.pk}/change/", {**base, **no_inline_rows(endpoints=good)}
+    )
+    assert response.status_code == 302, [
+        response.context["adminform"].form.errors,
+        [f.errors for f in response.context["inline_admin_formsets"][0].formset.forms],
+    ]
+    row = robot.endpoints.get()
+    assert (row.address, row.allow, row.read_only) == ("127.0.0.1:14560", [0, 76], True)
