@@ -7,6 +7,7 @@ from django.contrib.auth.models import Group, User
 from programs.models import Program, Run, Share
 from robotide.models import ClassTeacher
 from robots.models import Robot, robots_for_user
+from tests.admin_inlines import no_inline_rows
 
 pytestmark = pytest.mark.django_db
 
@@ -201,17 +202,6 @@ def test_the_robot_admin_edits_its_classes(client, lab):
     response = client.post(f"/admin/robots/robot/{robot.pk}/change/", data)
     assert response.status_code == 302, response.context["adminform"].form.errors
     assert list(robot.groups.all()) == [lab["klass"]]
-
-
-def no_inline_rows(**rows) -> dict:
-    """The admin's inline formsets (gateway endpoints, serial bridges): none, or one each."""
-    data = {}
-    for prefix in ("endpoints", "bridges"):
-        given = rows.get(prefix, {})
-        data.update({f"{prefix}-TOTAL_FORMS": "1" if given else "0",
-                     f"{prefix}-INITIAL_FORMS": "0"})  # fmt: skip
-        data.update({f"{prefix}-0-{k}": v for k, v in given.items()})
-    return data
 
 
 def test_the_robot_admin_adds_gateway_endpoints_checked_as_the_api_checks_them(client, lab):

@@ -7,6 +7,7 @@ from django.contrib.auth.models import User
 import rhal
 from rhal.options import driver_options
 from robots.models import Robot
+from tests.admin_inlines import no_inline_rows
 
 pytestmark = pytest.mark.django_db
 
@@ -129,6 +130,7 @@ def test_the_admin_edits_the_same_typed_options(client, staff, robot):
             "option_max_linear": "0.25",
             "option_max_angular": "2.0",
             "run_settings": '{"limits": {"cpu_seconds": 9}}',
+            **no_inline_rows(),
         },
     )
     assert response.status_code == 302, response.content.decode()
@@ -139,7 +141,12 @@ def test_the_admin_edits_the_same_typed_options(client, staff, robot):
 def test_the_admin_refuses_what_is_not_a_run_setting(client, staff, robot):
     response = client.post(
         f"/admin/robots/robot/{robot.pk}/change/",
-        {"name": robot.name, "url": robot.url, "run_settings": '{"max_linear": 1}'},
+        {
+            "name": robot.name,
+            "url": robot.url,
+            "run_settings": '{"max_linear": 1}',
+            **no_inline_rows(),
+        },
     )
     assert "not a run setting: max_linear" in response.content.decode()
 
