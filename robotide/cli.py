@@ -302,7 +302,7 @@ def ensure_sim_robot() -> None:
 async def serve(host: str, port: int, with_agents: bool) -> None:
     from django.conf import settings
 
-    from robots import bus
+    from robots import bus, presence
     from robots.agent import AgentManager
 
     config = uvicorn.Config(
@@ -320,13 +320,18 @@ async def serve(host: str, port: int, with_agents: bool) -> None:
     server = _Server(config)
     bus.serve_on(asyncio.get_running_loop())
     manager = AgentManager() if with_agents else None
+    watcher = None
     if manager is not None:
         await manager.start()
+    else:  # fleet mode: the agents are elsewhere, and may go silent
+        watcher = asyncio.create_task(presence.watch(), name="presence")
     try:
         await server.serve()
     finally:
         if manager is not None:
             await manager.shutdown()
+        if watcher is not None:
+            watcher.cancel()
 
 
 class _Server(uvicorn.Server):

@@ -35,6 +35,19 @@ def env_int(name: str, default: int) -> int:
         raise ValueError(f"{name} must be an integer, not {value!r}") from None
 
 
+def env_float(name: str, default: float) -> float:
+    value = os.environ.get(name)
+    if value is None or value == "":
+        return default
+    try:
+        result = float(value)
+    except ValueError:
+        result = -1.0
+    if not result > 0:
+        raise ValueError(f"{name} must be a number of seconds above 0, not {value!r}")
+    return result
+
+
 def env_list(name: str, default: list[str]) -> list[str]:
     value = os.environ.get(name)
     if not value:
@@ -268,6 +281,11 @@ RUN_ISOLATION = {
     "network": os.environ.get("ROBOTIDE_RUN_NETWORK", "loopback"),
     "tmp_mb": env_int("ROBOTIDE_RUN_TMP_MB", 64),
 }
+
+# -- Fleet mode: an agent says it is alive this often; a robot not heard from for
+# AGENT_OFFLINE_AFTER seconds is offline, and the runs it had are lost.
+AGENT_HEARTBEAT = env_float("ROBOTIDE_AGENT_HEARTBEAT", 2.0)
+AGENT_OFFLINE_AFTER = env_float("ROBOTIDE_AGENT_OFFLINE_AFTER", 7.0)
 
 # -- MAVLink gateway (robots.gateway): the endpoints a mavlink:// robot starts with.
 # Ground stations (QGroundControl, Mission Planner) reach the robot on UDP 14550; programs run

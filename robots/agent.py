@@ -14,6 +14,7 @@ import itertools
 import logging
 import secrets
 import shutil
+import socket
 import tempfile
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
@@ -53,7 +54,6 @@ from robots.robot_api import RobotApi
 log = logging.getLogger(__name__)
 
 TELEMETRY_INTERVAL = 0.25
-HEARTBEAT_INTERVAL = 5.0
 SHOWS_SNAPSHOT_EVERY = 4  # telemetry ticks
 RETRY_DELAY = 1.0
 LINK_RETRY_MAX = 30.0  # seconds between tries to open a robot that is away
@@ -142,6 +142,7 @@ class RobotAgent:
             asyncio.create_task(self._publish_loop(), name=f"{self.name}-publish"),
             asyncio.create_task(self._telemetry_loop(), name=f"{self.name}-telemetry"),
             asyncio.create_task(self._keep_robot_open(), name=f"{self.name}-link"),
+            asyncio.create_task(self._heartbeat_loop(), name=f"{self.name}-heartbeat"),
         ]
         self.ready.set()
         log.info("agent %s: %s, Robot API on %s", self.name, robot.url, self.api_address)
@@ -520,8 +521,6 @@ class RobotAgent:
 
     async def _telemetry_loop(self) -> None:
         """Latest-state snapshots, throttled at the source; all shown values once a second."""
-        last_heartbeat = 0.0
-        loop = asyncio.get_running_loop()
         for tick in itertools.count():
             sensors = await self.readings()
             changed, self.api.changed_shows = self.api.changed_shows, {}
@@ -539,15 +538,20 @@ class RobotAgent:
                     "all_shows": full,  # a full snapshot replaces what the page shows
                 },
             )
-            if loop.time() - last_heartbeat >= HEARTBEAT_INTERVAL:
-                last_heartbeat = loop.time()
-                try:
-                    await database_sync_to_async(Robot.objects.filter(name=self.name).update)(
-                        last_seen=timezone.now()
-                    )
-                except Exception:  # the database away for a moment must not stop the robot
-                    log.exception("agent %s: heartbeat failed", self.name)
             await asyncio.sleep(TELEMETRY_INTERVAL)
+
+    async def _heartbeat_loop(self) -> None:
+        """The portal counts a robot online while this goes on (Robot.online)."""
+        beat = database_sync_to_async(Robot.objects.filter(name=self.name).update)
+        await beat(
+            last_seen=timezone.now(), agent_host=socket.gethostname(), agent_started=timezone.now()
+        )
+        while True:
+            await asyncio.sleep(settings.AGENT_HEARTBEAT)
+            try:
+                await beat(last_seen=timezone.now())
+            except Exception:  # the database away for a moment must not stop the robot
+                log.exception("agent %s: heartbeat failed", self.name)
 
 
 def flat_units(specs: dict) -> dict[str, str]:

@@ -47,7 +47,9 @@ class RobotOut(Schema):
     url: str
     settings: dict
     description: str
-    last_seen: str | None = None
+    online: bool = Field(description="its agent sent a heartbeat within the last few seconds")
+    last_seen: str | None = Field(None, description="its agent's last heartbeat")
+    agent_host: str = Field("", description="where its agent runs")
     isolation: str = Field(description="What its agent gives each run, or why runs are refused")
 
     @staticmethod

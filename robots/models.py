@@ -19,7 +19,13 @@ class Robot(models.Model):
     settings = models.JSONField(default=dict, blank=True)
     description = models.CharField(max_length=200, blank=True)
     created = models.DateTimeField(default=timezone.now)
-    last_seen = models.DateTimeField(null=True, blank=True, editable=False)
+    last_seen = models.DateTimeField(
+        null=True, blank=True, editable=False, help_text="Its agent's last heartbeat"
+    )
+    agent_host = models.CharField(
+        max_length=200, blank=True, editable=False, help_text="Where its agent runs"
+    )
+    agent_started = models.DateTimeField(null=True, blank=True, editable=False)
     isolation = models.CharField(
         max_length=200, blank=True, editable=False, help_text="What its agent gives each run"
     )
@@ -47,6 +53,14 @@ class Robot(models.Model):
 
     def __str__(self) -> str:
         return self.name
+
+    @property
+    def online(self) -> bool:
+        """Its agent sent a heartbeat within AGENT_OFFLINE_AFTER seconds."""
+        if self.last_seen is None:
+            return False
+        age = (timezone.now() - self.last_seen).total_seconds()
+        return age < django_settings.AGENT_OFFLINE_AFTER
 
     def configurable_by(self, user) -> bool:
         return user.is_staff or (self.owner_id is not None and self.owner_id == user.pk)

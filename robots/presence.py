@@ -1,0 +1,62 @@
+"""Which robots are online, in fleet mode: an agent's heartbeat (Robot.last_seen) says so.
+
+The web tier watches: runs on a robot whose agent has gone silent are marked ``lost`` within
+AGENT_OFFLINE_AFTER seconds (nothing supervises them any more), and the pages hear of it. Every
+web worker may watch; the update is conditional, so each run is marked once. An agent that
+comes back serves again as soon as its first heartbeat lands.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from datetime import timedelta
+
+from channels.db import database_sync_to_async
+from channels.layers import get_channel_layer
+from django.conf import settings
+from django.db.models import Q
+from django.utils import timezone
+
+from programs.models import Run
+from robots.bus import RUNS_GROUP, run_group
+from robots.models import robot_group
+
+log = logging.getLogger(__name__)
+
+
+def silent_since() -> timezone.datetime:
+    return timezone.now() - timedelta(seconds=settings.AGENT_OFFLINE_AFTER)
+
+
+def sweep_lost() -> list[tuple[int, str]]:
+    """Mark lost the runs of robots whose agent went silent: (run id, robot name) of each."""
+    cutoff = silent_since()
+    silent = Q(robot__last_seen__lt=cutoff) | Q(robot__last_seen__isnull=True)
+    candidates = Run.objects.filter(silent, state__in=Run.ACTIVE, created__lt=cutoff)
+    lost = []
+    for run_id, robot_name in candidates.values_list("pk", "robot__name"):
+        updated = Run.objects.filter(pk=run_id, state__in=Run.ACTIVE).update(
+            state=Run.State.LOST,
+            reason=f"the agent of robot {robot_name!r} stopped answering",
+            ended=timezone.now(),
+        )
+        if updated:
+            lost.append((run_id, robot_name))
+    return lost
+
+
+async def watch() -> None:
+    """Until cancelled: sweep every heartbeat period, and tell the pages of runs lost."""
+    layer = get_channel_layer()
+    while True:
+        try:
+            for run_id, robot in await database_sync_to_async(sweep_lost)():
+                log.warning("run %s lost: the agent of robot %s stopped answering", run_id, robot)
+                await layer.group_send(run_group(run_id), {"type": "run.state", "run_id": run_id})
+                changed = {"type": "runs.changed", "run_id": run_id, "robot": robot}
+                await layer.group_send(RUNS_GROUP, changed)
+                await layer.group_send(robot_group(robot), {"type": "robot.runs", "robot": robot})
+        except Exception:  # the database or Redis away for a moment: try again next time
+            log.exception("presence watch failed")
+        await asyncio.sleep(settings.AGENT_HEARTBEAT)

@@ -1,0 +1,60 @@
+"""A robot is online while its agent's heartbeat lands; the runs of one gone silent are lost."""
+
+from datetime import timedelta
+
+import pytest
+from django.contrib.auth.models import User
+from django.utils import timezone
+
+from programs.models import Program, Run
+from robotide.models import ApiToken
+from robots.models import Robot
+from robots.presence import sweep_lost
+
+pytestmark = pytest.mark.django_db
+
+
+@pytest.fixture
+def lab():
+    alice = User.objects.create_user("alice")
+    program = Program.objects.create(owner=alice, name="p", language="python")
+    now = timezone.now()
+    alive = Robot.objects.create(name="alive", url="sim://", last_seen=now)
+    silent = Robot.objects.create(
+        name="silent", url="sim://", last_seen=now - timedelta(seconds=60)
+    )
+    never = Robot.objects.create(name="never", url="sim://")
+    return alice, program, alive, silent, never
+
+
+def run_on(program, robot, state, age=30):
+    run = Run.create_for(program, robot, program.owner)
+    created = timezone.now() - timedelta(seconds=age)
+    Run.objects.filter(pk=run.pk).update(state=state, created=created)
+    return run
+
+
+def test_runs_of_a_silent_agent_are_lost_and_the_others_are_not(lab):
+    alice, program, alive, silent, never = lab
+    running_alive = run_on(program, alive, Run.State.RUNNING)
+    running_silent = run_on(program, silent, Run.State.RUNNING)
+    starting_never = run_on(program, never, Run.State.STARTING)
+    just_asked = run_on(program, silent, Run.State.STARTING, age=0)  # may still be handed over
+    finished = run_on(program, silent, Run.State.FINISHED)
+    lost = sweep_lost()
+    assert sorted(lost) == sorted([(running_silent.pk, "silent"), (starting_never.pk, "never")])
+    running_silent.refresh_from_db()
+    assert running_silent.state == "lost" and "stopped answering" in running_silent.reason
+    for run, state in [(running_alive, "running"), (just_asked, "starting"),
+                       (finished, "finished")]:  # fmt: skip
+        run.refresh_from_db()
+        assert run.state == state
+    assert sweep_lost() == []  # once
+
+
+def test_the_api_says_which_robots_are_online(client, lab):
+    alice, *_ = lab
+    _, token = ApiToken.issue(alice)
+    robots = client.get("/api/robots", HTTP_AUTHORIZATION=f"Bearer {token}").json()
+    online = {r["name"]: (r["online"], r["last_seen"] is not None) for r in robots}
+    assert online == {"alive": (True, True), "silent": (False, True), "never": (False, False)}
