@@ -31,6 +31,7 @@ import os
 import secrets
 import signal
 import sys
+import threading
 
 import uvicorn
 
@@ -49,6 +50,10 @@ def main(argv: list[str] | None = None) -> int:
     commands = parser.add_subparsers(dest="command", required=True)
     up = commands.add_parser("up", help="set up and serve the appliance")
     up.add_argument("--bind", default=os.environ.get("ROBOTIDE_BIND", DEFAULT_BIND))
+    up.add_argument(
+        "--workers", type=int, default=int(os.environ.get("ROBOTIDE_WEB_WORKERS") or 1),
+        help="web server processes (fleet mode: REDIS_URL set); default ROBOTIDE_WEB_WORKERS or 1",
+    )  # fmt: skip
     agent = commands.add_parser("agent", help="run one robot's agent")
     agent.add_argument("name")
     token = commands.add_parser("token", help="print a new API token for a user")
@@ -251,9 +256,20 @@ def cmd_up(args, rest) -> int:
     ensure_admin()
     ensure_sim_robot()
     embedded = not settings.REDIS_URL
+    if args.workers < 1 or (embedded and args.workers > 1):
+        raise SystemExit(
+            "robotide: --workers must be 1 in embedded mode (the agents live in the one web "
+            "process); set REDIS_URL and run the agents as `robotide agent NAME` for more"
+        )
+    if not embedded:
+        call_command("collectstatic", interactive=False, verbosity=0)
     mode = "embedded: web and robot agents in this process" if embedded else "web tier only"
-    print(f"robotide serving on http://{host}:{port}/ ({mode})", flush=True)
-    asyncio.run(serve(host, port, with_agents=embedded))
+    workers = f", {args.workers} workers" if args.workers > 1 else ""
+    print(f"robotide serving on http://{host}:{port}/ ({mode}{workers})", flush=True)
+    if args.workers > 1:
+        serve_workers(host, port, args.workers)
+    else:
+        asyncio.run(serve(host, port, with_agents=embedded))
     return 0
 
 
@@ -299,24 +315,39 @@ def ensure_sim_robot() -> None:
     )
 
 
-async def serve(host: str, port: int, with_agents: bool) -> None:
+def server_options() -> dict:
     from django.conf import settings
 
+    return {
+        "lifespan": "off",
+        "ws": "websockets-sansio",
+        "log_level": "warning",
+        "access_log": False,
+        # Forwarded-for headers only from a proxy we are told of: a local program could
+        # otherwise pose as any address (and dodge the sign-in throttle).
+        "proxy_headers": settings.BEHIND_PROXY,
+        # Camera streams never end by themselves: stop waiting for them after a while.
+        "timeout_graceful_shutdown": 5,
+    }
+
+
+def serve_workers(host: str, port: int, workers: int) -> None:
+    """Fleet mode's web tier: uvicorn's worker processes, which it restarts if one dies; here
+    the watch on the agents' heartbeats (robots.presence), in a thread of its own."""
+    from robots import presence
+
+    watcher = threading.Thread(target=asyncio.run, args=(presence.watch(),), daemon=True)
+    watcher.start()
+    uvicorn.run(
+        "robotide.asgi:application", host=host, port=port, workers=workers, **server_options()
+    )
+
+
+async def serve(host: str, port: int, with_agents: bool) -> None:
     from robots import bus, presence
     from robots.agent import AgentManager
 
-    config = uvicorn.Config(
-        "robotide.asgi:application",
-        host=host,
-        port=port,
-        lifespan="off",
-        ws="websockets-sansio",
-        log_level="warning",
-        access_log=False,
-        # Forwarded-for headers only from a proxy we are told of: a local program could
-        # otherwise pose as any address (and dodge the sign-in throttle).
-        proxy_headers=settings.BEHIND_PROXY,
-    )
+    config = uvicorn.Config("robotide.asgi:application", host=host, port=port, **server_options())
     server = _Server(config)
     bus.serve_on(asyncio.get_running_loop())
     manager = AgentManager() if with_agents else None

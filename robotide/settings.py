@@ -259,8 +259,13 @@ STORAGES = {
     "default": {"BACKEND": "django.core.files.storage.FileSystemStorage"},
     "staticfiles": {"BACKEND": "django.contrib.staticfiles.storage.StaticFilesStorage"},
 }
-# Serve straight from the app folders: no collectstatic step for the one-command appliance.
-WHITENOISE_USE_FINDERS = True
+if REDIS_URL and not DEBUG:
+    # The portal: `robotide up` collects the files once; they are served compressed, with
+    # names that change with their content, so browsers keep them for a year.
+    STORAGES["staticfiles"]["BACKEND"] = "whitenoise.storage.CompressedManifestStaticFilesStorage"
+else:
+    # Serve straight from the app folders: no collectstatic step for the one-command appliance.
+    WHITENOISE_USE_FINDERS = True
 WHITENOISE_AUTOREFRESH = DEBUG
 
 # Limits a run gets unless its robot's settings say otherwise (see programs.launcher).
