@@ -2,7 +2,9 @@
 
 robotide up [--bind HOST:PORT]   migrate, set up, serve (web + agents in one process, unless
                                  REDIS_URL is set: then the web tier only)
-robotide agent NAME              run one robot's agent (fleet mode)
+robotide agent NAME... [--url URL] [--sim N]
+                                 run robots' agents (fleet mode): those named (one registered
+                                 with --url if new) and N simulated ones, sim-1 to sim-N
 robotide token USERNAME          print a new API token for a user
 robotide robots detect [--json]  list serial ports and USB devices that look like robots
 robotide export USERNAME [-o FILE]
@@ -54,8 +56,13 @@ def main(argv: list[str] | None = None) -> int:
         "--workers", type=int, default=int(os.environ.get("ROBOTIDE_WEB_WORKERS") or 1),
         help="web server processes (fleet mode: REDIS_URL set); default ROBOTIDE_WEB_WORKERS or 1",
     )  # fmt: skip
-    agent = commands.add_parser("agent", help="run one robot's agent")
-    agent.add_argument("name")
+    agent = commands.add_parser("agent", help="run robots' agents (fleet mode)")
+    agent.add_argument("names", nargs="*", metavar="NAME", help="the robots to serve")
+    agent.add_argument("--url", help="register NAME with this driver URL if it is not known")
+    agent.add_argument(
+        "--sim", type=int, default=0, metavar="N",
+        help="also serve N simulated robots, sim-1 to sim-N (registered if new)",
+    )  # fmt: skip
     token = commands.add_parser("token", help="print a new API token for a user")
     token.add_argument("username")
     token.add_argument("--name", default="command line")
@@ -390,26 +397,58 @@ class _Server(uvicorn.Server):
 def cmd_agent(args, rest) -> int:
     from robots.models import Robot
 
-    if not Robot.objects.filter(name=args.name).exists():
-        print(f"robotide: no robot named {args.name!r}; add it in the admin or POST /api/robots",
-              file=sys.stderr)  # fmt: skip
+    names = list(args.names)
+    if args.url and len(names) != 1:
+        print("robotide agent: --url registers one robot: give its NAME", file=sys.stderr)
+        return 2
+    for n in range(1, args.sim + 1):
+        Robot.objects.get_or_create(
+            name=f"sim-{n}", defaults={"url": "sim://", "description": "Simulated robot"}
+        )
+        names.append(f"sim-{n}")
+    if args.url:
+        register_robot(names[0], args.url)
+    missing = [n for n in names if not Robot.objects.filter(name=n).exists()]
+    if missing or not names:
+        print(f"robotide agent: no robot named {', '.join(map(repr, missing)) or 'given'};"
+              " add it in the admin, POST /api/robots, or give --url", file=sys.stderr)  # fmt: skip
         return 2
     protect_data_dir()
-    asyncio.run(run_agent(args.name))
+    asyncio.run(run_agents(names))
     return 0
 
 
-async def run_agent(name: str) -> None:
-    from robots.agent import RobotAgent
+def register_robot(name: str, url: str) -> None:
+    """A robot that comes with its agent: known from now on, with this URL if it is new."""
+    from robots.driver_settings import known_driver
+    from robots.models import Robot
 
-    agent = RobotAgent(name)
-    task = asyncio.create_task(agent.serve())
+    try:
+        known_driver(url)
+    except ValueError as exc:
+        raise SystemExit(f"robotide agent: {exc}") from None
+    robot, created = Robot.objects.get_or_create(name=name, defaults={"url": url})
+    if not created and robot.url != url:
+        print(f"robotide agent: robot {name!r} is known with {robot.url!r}; serving that"
+              " (change it on its page)", file=sys.stderr)  # fmt: skip
+
+
+async def run_agents(names: list[str]) -> None:
+    """Each robot's agent, until SIGTERM or SIGINT; one that fails is started again."""
+    from robots.agent import AgentManager
+
+    manager = AgentManager()
+    for name in names:
+        manager.start_agent(name)
+    stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, task.cancel)
-    print(f"robotide agent for robot {name!r} running", flush=True)
-    with contextlib.suppress(asyncio.CancelledError):
-        await task
+        loop.add_signal_handler(sig, stop.set)
+    print(f"robotide agent for {', '.join(names)} running", flush=True)
+    try:
+        await stop.wait()
+    finally:
+        await manager.shutdown()
 
 
 def cmd_token(args, rest) -> int:

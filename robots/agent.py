@@ -590,11 +590,14 @@ def resolve_isolation(robot: Robot) -> tuple[InForce | None, str]:
 
 
 class AgentManager:
-    """Embedded mode: one agent per robot, inside the web server process."""
+    """Agents in this process: every robot's in embedded mode (``start``), or those that
+    `robotide agent` names. One that fails is started again, after a growing pause."""
 
     def __init__(self):
         self.agents: dict[str, tuple[RobotAgent, asyncio.Task]] = {}
         self._listener: asyncio.Task | None = None
+        self._failures: dict[str, int] = {}
+        self._closing = False
 
     async def start(self) -> None:
         names = await database_sync_to_async(
@@ -614,8 +617,16 @@ class AgentManager:
         return agent
 
     def _agent_ended(self, name: str, task: asyncio.Task) -> None:
-        if not task.cancelled() and task.exception() is not None:
-            log.error("agent %s stopped: %r", name, task.exception())
+        if task.cancelled() or self._closing:
+            return
+        failures = self._failures[name] = self._failures.get(name, 0) + 1
+        delay = min(RETRY_DELAY * 2 ** (failures - 1), LINK_RETRY_MAX)
+        log.error("agent %s stopped: %r; again in %g s", name, task.exception(), delay)
+        asyncio.get_running_loop().call_later(delay, self._restart, name)
+
+    def _restart(self, name: str) -> None:
+        if not self._closing:
+            self.start_agent(name)
 
     async def _listen(self) -> None:
         layer = get_channel_layer()
@@ -630,6 +641,7 @@ class AgentManager:
                 self.start_agent(message["name"])
 
     async def shutdown(self) -> None:
+        self._closing = True
         if self._listener:
             self._listener.cancel()
         for _, task in self.agents.values():
