@@ -22,6 +22,7 @@ import asyncio
 import contextlib
 import itertools
 import logging
+import os
 import socket
 import time
 from dataclasses import dataclass, field
@@ -100,6 +101,11 @@ class Endpoint:
 
     async def stop(self) -> None:
         raise NotImplementedError
+
+    @property
+    def idle(self) -> bool:
+        """Nobody to send to yet (a UDP server no peer has reached): skipped, not a drop."""
+        return False
 
     def accepts(self, msgid: int) -> bool:
         if self.allow is not None and msgid not in self.allow:
@@ -213,7 +219,7 @@ class Router:
     def route(self, source: Endpoint, frames: list[tuple]) -> None:
         stats = source.stats
         stats.frames_in += len(frames)
-        others = [e for e in self.endpoints.values() if e is not source]
+        others = [e for e in self.endpoints.values() if e is not source and not e.idle]
         touched = set()
         routed = [] if self.taps else None
         seen = source.systems
@@ -355,6 +361,10 @@ class UdpEndpoint(Endpoint):
     @property
     def status(self) -> str:
         return "up" if self._sock is not None else "down"
+
+    @property
+    def idle(self) -> bool:
+        return self.mode == "server" and not self.peers
 
     def forget_older_than(self, when: float) -> None:
         super().forget_older_than(when)
@@ -512,6 +522,22 @@ class SerialEndpoint(_Reconnecting):
         # serial_asyncio reads 1 KiB a wakeup; a 921600-baud burst wants bigger reads.
         transport._max_read_size = 65536
         return transport
+
+    def send(self, frames):
+        transport = self._transport
+        if transport is None or transport.is_closing():
+            raise OSError("not connected")
+        data = b"".join(frames)
+        if not transport.get_write_buffer_size():
+            # serial_asyncio writes only on a later turn of the loop (add_writer, wait for
+            # writable, write, remove_writer), behind whatever that turn reads first: write now
+            # what the device takes, and queue only the rest.
+            try:
+                data = data[os.write(transport.serial.fileno(), data) :]
+            except (BlockingIOError, InterruptedError):
+                pass
+        if data:
+            transport.write(data)
 
 
 @dataclass(eq=False)

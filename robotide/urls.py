@@ -7,6 +7,7 @@ from programs import views as programs
 from robotide import views_account as account
 from robotide.api import api
 from robotide.security import LoginForm
+from robots import gateway_views
 from robots import views as robots
 
 urlpatterns = [
@@ -57,6 +58,17 @@ urlpatterns = [
     path("robots/<slug:name>/estop", robots.robot_estop, name="robot-estop"),
     path("robots/<slug:name>/run", robots.robot_run, name="robot-run"),
     path("robots/<slug:name>/camera.jpg", robots.robot_camera, name="robot-camera"),
+    path("robots/<slug:name>/gateway", gateway_views.robot_gateway, name="robot-gateway"),
+    path(
+        "robots/<slug:name>/gateway/endpoints",
+        gateway_views.robot_endpoint_add,
+        name="robot-endpoint-add",
+    ),
+    path(
+        "robots/<slug:name>/gateway/endpoints/<int:endpoint_id>/delete",
+        gateway_views.robot_endpoint_delete,
+        name="robot-endpoint-delete",
+    ),
     path(
         "accounts/login/",
         auth_views.LoginView.as_view(authentication_form=LoginForm),

@@ -68,7 +68,7 @@ def _robot(request, name: str, change: bool = False) -> Robot:
     return robot
 
 
-def _live(robot: Robot, kind: str = "bridges.stats") -> dict | None:
+def live_stats(robot: Robot, kind: str = "bridges.stats") -> dict | None:
     try:
         reply = ask_agent_sync(robot.name, kind, timeout=2.0)
     except AgentUnavailable:
@@ -76,7 +76,7 @@ def _live(robot: Robot, kind: str = "bridges.stats") -> dict | None:
     return {str(key): value for key, value in reply.get("bridges", {}).items()}
 
 
-def _out(row: SerialBridge, live: dict | None) -> dict:
+def bridge_out(row: SerialBridge, live: dict | None) -> dict:
     fields = {k: getattr(row, k) for k in ("id", "device", "baud", "address", "protocol")}
     fields["when_busy"] = row.when_busy
     if live is None:
@@ -98,8 +98,8 @@ def list_bridges(request, name: str):
 
 def bridge_rows(robot: Robot) -> list[dict]:
     """The robot's serial bridges as the API lists them, with the agent's live view."""
-    live = _live(robot)
-    return [_out(row, live) for row in robot.bridges.all()]
+    live = live_stats(robot)
+    return [bridge_out(row, live) for row in robot.bridges.all()]
 
 
 @bridges_router.post("/{name}/bridges", response={201: BridgeOut, 409: Error})
@@ -107,7 +107,7 @@ def add_bridge(request, name: str, data: BridgeIn):
     """Share a serial device over TCP; it listens at once (or says why it cannot)."""
     robot = _robot(request, name, change=True)
     row = SerialBridge.objects.create(robot=robot, **data.dict())
-    return Status(201, _out(row, _live(robot, "bridges.reload")))
+    return Status(201, bridge_out(row, live_stats(robot, "bridges.reload")))
 
 
 @bridges_router.delete("/{name}/bridges/{int:bridge_id}", response={204: None})
@@ -116,5 +116,5 @@ def delete_bridge(request, name: str, bridge_id: int):
     deleted, _ = robot.bridges.filter(pk=bridge_id).delete()
     if not deleted:
         raise HttpError(404, f"Robot {robot.name!r} has no serial bridge {bridge_id}.")
-    _live(robot, "bridges.reload")
+    live_stats(robot, "bridges.reload")
     return Status(204, None)

@@ -88,7 +88,7 @@ def _mavlink_robot(request: HttpRequest, name: str, change: bool = False) -> Rob
     return robot
 
 
-def _live(robot: Robot, kind: str = "gateway.stats") -> dict | None:
+def live_stats(robot: Robot, kind: str = "gateway.stats") -> dict | None:
     try:
         reply = ask_agent_sync(robot.name, kind, timeout=STATS_TIMEOUT)
     except AgentUnavailable:
@@ -96,7 +96,7 @@ def _live(robot: Robot, kind: str = "gateway.stats") -> dict | None:
     return {str(key): value for key, value in reply.get("endpoints", {}).items()}
 
 
-def _out(key, role: str, spec: dict, live: dict | None) -> dict:
+def endpoint_out(key, role: str, spec: dict, live: dict | None) -> dict:
     row = {"id": key, "role": role, **spec}
     if live is None:
         return {**row, "status": "unknown", "error": "the robot's agent is not answering"}
@@ -108,15 +108,15 @@ def _out(key, role: str, spec: dict, live: dict | None) -> dict:
 
 def endpoint_rows(robot: Robot, live: dict | None = None) -> list[dict]:
     """The robot's endpoints as the API lists them; ``live``: the agent's stats (asked if None)."""
-    live = live if live is not None else _live(robot)
+    live = live if live is not None else live_stats(robot)
     rows = []
     if live is not None:
         vehicle = live.get("vehicle", {})
-        rows.append(_out("vehicle", "vehicle", vehicle.get("spec") or {"type": "?"}, live))
+        rows.append(endpoint_out("vehicle", "vehicle", vehicle.get("spec") or {"type": "?"}, live))
         if "robot" in live:
-            rows.append(_out("robot", "robot", {"type": "local"}, live))
+            rows.append(endpoint_out("robot", "robot", {"type": "local"}, live))
     for endpoint in robot.endpoints.all():
-        rows.append(_out(endpoint.pk, endpoint.role, endpoint.spec(), live))
+        rows.append(endpoint_out(endpoint.pk, endpoint.role, endpoint.spec(), live))
     return rows
 
 
@@ -140,7 +140,7 @@ def add_endpoint_row(robot: Robot, spec: dict) -> dict:
     endpoint = GatewayEndpoint(robot=robot)
     endpoint.set_spec(spec)
     endpoint.save()
-    return _out(endpoint.pk, "", endpoint.spec(), _live(robot, "gateway.reload"))
+    return endpoint_out(endpoint.pk, "", endpoint.spec(), live_stats(robot, "gateway.reload"))
 
 
 @gateway_router.put("/{name}/endpoints/{int:endpoint_id}", response={200: EndpointOut, 409: Error})
@@ -150,7 +150,9 @@ def change_endpoint(request, name: str, endpoint_id: int, data: EndpointIn):
     endpoint = _row(robot, endpoint_id)
     endpoint.set_spec(data.spec())
     endpoint.save()
-    return _out(endpoint.pk, endpoint.role, endpoint.spec(), _live(robot, "gateway.reload"))
+    return endpoint_out(
+        endpoint.pk, endpoint.role, endpoint.spec(), live_stats(robot, "gateway.reload")
+    )
 
 
 @gateway_router.delete("/{name}/endpoints/{int:endpoint_id}", response={204: None, 409: Error})
@@ -162,7 +164,7 @@ def delete_endpoint(request, name: str, endpoint_id: int):
 
 def delete_endpoint_row(robot: Robot, endpoint_id: int) -> None:
     _row(robot, endpoint_id).delete()
-    _live(robot, "gateway.reload")
+    live_stats(robot, "gateway.reload")
 
 
 def _row(robot: Robot, endpoint_id: int) -> GatewayEndpoint:

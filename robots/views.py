@@ -10,6 +10,7 @@ from django.views.decorators.http import require_POST
 
 from programs.access import get_program_for_user, programs_for_user, runs_for_user
 from programs.models import Run, RunRefused, start_run
+from robots import gateway_views
 from robots.bus import AgentUnavailable, ask_agent_sync, reconfigure_sync
 from robots.camera import has_camera
 from robots.driver_settings import current_values
@@ -49,6 +50,8 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
         context["holder"] = state["lease"]
         context["drive"] = state["drive"]
         context["shows"] = show_items(state["shows"])
+    # The gateway card once, server-side; it then reloads itself (robots/_gateway.html).
+    context["gateway"] = gateway_views.gateway_context(robot, away="agent_error" in context)
     return render(request, "robots/detail.html", context)
 
 
