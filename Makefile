@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test lint bench fleet clean
+.PHONY: run test lint bench bench-deps fleet clean
 
 $(BIN)/robotide: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -26,6 +26,12 @@ lint: $(BIN)/robotide
 
 bench: $(BIN)/robotide
 	$(BIN)/python -m benchmarks
+
+# What benchmarks/gateway.py compares the router with: socat (the raw byte forwarder) and
+# MAVProxy (a reference, in the venv only: not a test dependency).
+bench-deps: $(BIN)/robotide
+	command -v socat >/dev/null || { apt-get update && apt-get install -y socat; }
+	$(BIN)/pip install --quiet MAVProxy
 
 clean:
 	rm -rf $(VENV) var

@@ -15,4 +15,5 @@ BENCHMARKS = (
     "drivers",
     "robot_page",
     "camera",
+    "gateway",
 )
