@@ -29,6 +29,11 @@ bench: $(BIN)/robotide
 
 # What benchmarks/gateway.py compares the router with: socat (the raw byte forwarder) and
 # MAVProxy (a reference, in the venv only: not a test dependency).
+# The compose file's services as processes on this machine (its PostgreSQL and Redis).
+fleet: $(BIN)/robotide
+	./scripts/install-test-deps.sh
+	$(BIN)/python -m robotide.fleet
+
 bench-deps: $(BIN)/robotide
 	command -v socat >/dev/null || { apt-get update && apt-get install -y socat; }
 	$(BIN)/pip install --quiet MAVProxy

@@ -2,6 +2,8 @@
 
 robotide up [--bind HOST:PORT]   migrate, set up, serve (web + agents in one process, unless
                                  REDIS_URL is set: then the web tier only)
+robotide robots online [--here] [NAME...]
+                                 exit 0 if the robots' agents beat lately (a health check)
 robotide agent NAME... [--url URL] [--sim N]
                                  run robots' agents (fleet mode): those named (one registered
                                  with --url if new) and N simulated ones, sim-1 to sim-N
@@ -32,6 +34,7 @@ import json
 import os
 import secrets
 import signal
+import socket
 import sys
 import threading
 
@@ -47,7 +50,8 @@ def setup_django() -> None:
     django.setup()
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """Every command and option; main() runs them (the compose file's check parses with it)."""
     parser = argparse.ArgumentParser(prog="robotide", description="Web-based robot programming.")
     commands = parser.add_subparsers(dest="command", required=True)
     up = commands.add_parser("up", help="set up and serve the appliance")
@@ -60,8 +64,9 @@ def main(argv: list[str] | None = None) -> int:
     agent.add_argument("names", nargs="*", metavar="NAME", help="the robots to serve")
     agent.add_argument("--url", help="register NAME with this driver URL if it is not known")
     agent.add_argument(
-        "--sim", type=int, default=0, metavar="N",
-        help="also serve N simulated robots, sim-1 to sim-N (registered if new)",
+        "--sim", type=int, default=int(os.environ.get("ROBOTIDE_SIM_ROBOTS") or 0), metavar="N",
+        help="also serve N simulated robots, sim-1 to sim-N (registered if new); "
+        "default ROBOTIDE_SIM_ROBOTS or 0",
     )  # fmt: skip
     token = commands.add_parser("token", help="print a new API token for a user")
     token.add_argument("username")
@@ -70,6 +75,11 @@ def main(argv: list[str] | None = None) -> int:
     robot_commands = robots.add_subparsers(dest="robots_command", required=True)
     detect = robot_commands.add_parser("detect", help="list devices that look like robots")
     detect.add_argument("--json", action="store_true", help="print JSON lines")
+    online = robot_commands.add_parser(
+        "online", help="exit 0 if these robots' agents beat lately (a health check)"
+    )
+    online.add_argument("names", nargs="*", metavar="NAME")
+    online.add_argument("--here", action="store_true", help="the robots served from this host")
     export = commands.add_parser("export", help="a user's programs as a zip of plain files")
     export.add_argument("username")
     export.add_argument(
@@ -116,8 +126,13 @@ def main(argv: list[str] | None = None) -> int:
                         help="the same as --speed 0")  # fmt: skip
     replay.add_argument("--loop", action="store_true", help="from the start again at the end")
     commands.add_parser("manage", help="Django management commands", add_help=False)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
     args, rest = parser.parse_known_args(argv)
-    if args.command == "robots":
+    if args.command == "robots" and args.robots_command == "detect":
         if rest:
             parser.error(f"unrecognized arguments: {' '.join(rest)}")
         return cmd_detect(args)
@@ -137,6 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     return {
         "up": cmd_up,
         "agent": cmd_agent,
+        "robots": cmd_online,
         "token": cmd_token,
         "export": cmd_export,
         "import": cmd_import,
@@ -416,6 +432,28 @@ def cmd_agent(args, rest) -> int:
     protect_data_dir()
     asyncio.run(run_agents(names))
     return 0
+
+
+def cmd_online(args, rest) -> int:
+    from robots.models import Robot
+
+    robots = Robot.objects.all()
+    if args.here:
+        robots = robots.filter(agent_host=socket.gethostname())
+    if args.names:
+        robots = robots.filter(name__in=args.names)
+    found = {robot.name: robot for robot in robots}
+    asked = args.names or list(found)
+    if not asked:
+        print("robotide robots online: no robot served here", file=sys.stderr)
+        return 1
+    offline = [name for name in asked if name not in found or not found[name].online]
+    for name in asked:
+        robot = found.get(name)
+        seen = robot.last_seen.isoformat() if robot and robot.last_seen else "never"
+        state = "online" if name not in offline else "offline"
+        print(f"{name}: {state} (last seen {seen})")
+    return 1 if offline else 0
 
 
 def register_robot(name: str, url: str) -> None:

@@ -5,6 +5,7 @@ from django.views.generic import RedirectView
 
 from programs import views as programs
 from robotide import views_account as account
+from robotide import views_health
 from robotide.api import api
 from robotide.security import LoginForm
 from robots import gateway_views
@@ -12,6 +13,7 @@ from robots import views as robots
 
 urlpatterns = [
     path("", RedirectView.as_view(pattern_name="program-list"), name="home"),
+    path("healthz", views_health.healthz, name="healthz"),
     path("programs/", programs.program_list, name="program-list"),
     path("programs/new", programs.program_create, name="program-create"),
     path("programs/upload", programs.program_upload, name="program-upload"),
