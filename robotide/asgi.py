@@ -22,6 +22,7 @@ from django.urls import path, re_path  # noqa: E402
 
 from programs.consumers import RunConsumer, RunListConsumer  # noqa: E402
 from robotide.security import SameOriginWebsocket  # noqa: E402
+from robotide.served_by import ServedBy  # noqa: E402
 from robots.camera import CameraStream  # noqa: E402
 from robots.consumers import RobotConsumer  # noqa: E402
 
@@ -36,11 +37,13 @@ http_urlpatterns = [
     re_path(r"", django_http_app),  # everything else
 ]
 
-application = ProtocolTypeRouter(
-    {
-        "http": URLRouter(http_urlpatterns),
-        "websocket": SameOriginWebsocket(
-            AllowedHostsOriginValidator(AuthMiddlewareStack(URLRouter(websocket_urlpatterns)))
-        ),
-    }
+application = ServedBy(
+    ProtocolTypeRouter(
+        {
+            "http": URLRouter(http_urlpatterns),
+            "websocket": SameOriginWebsocket(
+                AllowedHostsOriginValidator(AuthMiddlewareStack(URLRouter(websocket_urlpatterns)))
+            ),
+        }
+    )
 )

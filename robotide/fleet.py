@@ -31,24 +31,25 @@ BACKING = ("postgres", "redis")  # compose services the machine's own servers st
 _VARIABLE = re.compile(r"\$\{(\w+)(?::?-([^}]*))?\}")
 
 
-def load(files: list[Path]) -> dict[str, dict]:
+def load(files: list[Path], variables: dict | None = None) -> dict[str, dict]:
     """The services of the compose files, later files overriding earlier ones, with
-    ``${VAR:-default}`` replaced from this environment."""
+    ``${VAR:-default}`` replaced from ``variables`` (default: this environment)."""
+    variables = os.environ if variables is None else variables
     services: dict[str, dict] = {}
     for path in files:
         data = yaml.safe_load(path.read_text()) or {}
         for name, service in (data.get("services") or {}).items():
             services[name] = {**services.get(name, {}), **(service or {})}
-    return _interpolate(services)
+    return _interpolate(services, variables)
 
 
-def _interpolate(value):
+def _interpolate(value, variables):
     if isinstance(value, str):
-        return _VARIABLE.sub(lambda m: os.environ.get(m.group(1)) or (m.group(2) or ""), value)
+        return _VARIABLE.sub(lambda m: variables.get(m.group(1)) or (m.group(2) or ""), value)
     if isinstance(value, list):
-        return [_interpolate(item) for item in value]
+        return [_interpolate(item, variables) for item in value]
     if isinstance(value, dict):
-        return {key: _interpolate(item) for key, item in value.items()}
+        return {key: _interpolate(item, variables) for key, item in value.items()}
     return value
 
 
@@ -73,10 +74,16 @@ class Service:
 
 
 class Fleet:
-    def __init__(self, files: list[Path], *, data: Path, database: str, redis: str, host: str):
+    def __init__(
+        self, files: list[Path], *, data: Path, database: str, redis: str, host: str,
+        only: list[str] | None = None, variables: dict | None = None,
+    ) -> None:  # fmt: skip
         self.data, self.database, self.redis, self.host = data, database, redis, host
+        found = robotide_services(load(files, variables))
         self.services = {
-            name: self._service(name, spec) for name, spec in robotide_services(load(files)).items()
+            name: self._service(name, spec)
+            for name, spec in found.items()
+            if only is None or name in only
         }
         self.stopping = False
         self._lock = threading.Lock()
