@@ -103,7 +103,7 @@ class Fleet:
     def _local(self, arg: str, spec: dict) -> str:
         """A bind address published by ``ports`` listens on FLEET_HOST here."""
         host, _, port = arg.rpartition(":")
-        published = {p.split(":")[-1].split("/")[0]: p.split(":")[0] for p in spec.get("ports", [])}
+        published = _published(spec)
         if host in ("0.0.0.0", "::") and port in published:
             return f"{self.host}:{published[port]}"
         return arg
@@ -116,8 +116,7 @@ class Fleet:
         urls = [u for arg in test[2:] for u in re.findall(r"http://[^'\")\s]+", arg)]
         if urls:  # the service's own port, as published here
             parts = urlsplit(urls[0])
-            published = {p.split(":")[-1]: p.split(":")[0] for p in spec.get("ports", [])}
-            port = published.get(str(parts.port), parts.port)
+            port = _published(spec).get(str(parts.port), parts.port)
             return urlunsplit(parts._replace(netloc=f"{self.host}:{port}"))
         return None
 
@@ -219,6 +218,15 @@ class Fleet:
             except subprocess.TimeoutExpired:
                 os.killpg(service.process.pid, signal.SIGKILL)
                 service.process.wait()
+
+
+def _published(spec: dict) -> dict[str, str]:
+    """``ports: ["8080:8000"]`` -> {"8000": "8080"}: the container's port, as published."""
+    found = {}
+    for mapping in spec.get("ports", []):
+        outside, _, inside = str(mapping).rpartition(":")
+        found[inside.split("/")[0]] = outside.rpartition(":")[2] or inside.split("/")[0]
+    return found
 
 
 def ensure_database(url: str) -> None:
