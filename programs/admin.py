@@ -139,7 +139,7 @@ class RunAdmin(admin.ModelAdmin):
 
     @admin.action(description="Stop selected runs")
     def stop_runs(self, request, queryset):
-        runs = [run for run in queryset.select_related("robot") if run.active]
+        runs = [run for run in queryset.select_related("robot") if run.ongoing]
         asked = 0
         for run in runs:
             try:

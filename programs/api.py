@@ -17,12 +17,12 @@ from programs.access import (
     get_program_for_user,
     get_run_for_user,
     programs_for_user,
-    runs_for_user,
 )
 from programs.languages import LANGUAGES, get_language
 from programs.models import MAX_SOURCE_BYTES, Program, Run, request_stop, start_run
 from programs.runlog import plain_text
 from robotide.schemas import Body
+from robots import run_queue
 from robots.models import get_robot_for_user
 
 programs_router = Router(tags=["programs"])
@@ -113,11 +113,31 @@ class RunOut(Schema):
     robot: str = Field(alias="robot.name")
     owner: str = Field(alias="owner.username")
     state: str
+    queue_position: int | None = Field(
+        None, description="while queued: its place in its robot's line, 1 for the next to start"
+    )
     exit_code: int | None
     reason: str
     created: datetime
     started: datetime | None
     ended: datetime | None
+
+    @staticmethod
+    def resolve_queue_position(run: Run) -> int | None:
+        return run.queue_rank
+
+
+class QueueMoveIn(Body):
+    position: int = Field(ge=1, description="its new place in line, 1-based (past the end: last)")
+
+
+class QueueResumeIn(Body):
+    robot: str = Field(min_length=1)
+
+
+class QueueResumedOut(Schema):
+    robot: str
+    waiting: int = Field(description="runs waiting in the queue that moves again")
 
 
 class Error(Schema):
@@ -313,7 +333,8 @@ def push_program(request, program_id: int, data: PushIn):
 
 @runs_router.get("", response=list[RunOut])
 def list_runs(request, state: RunState | None = None, robot: str | None = None, limit: int = 100):
-    runs = runs_for_user(request.user)
+    """Runs you may see; to staff and a robot's owner, also every run queued on it."""
+    runs = run_queue.runs_to_see(request.user)
     if state is not None:
         runs = runs.filter(state=state)
     if robot is not None:
@@ -323,7 +344,7 @@ def list_runs(request, state: RunState | None = None, robot: str | None = None, 
 
 @runs_router.get("/{int:run_id}", response=RunOut)
 def get_run(request, run_id: int):
-    return get_run_for_user(request.user, run_id)
+    return run_queue.get_run_to_manage(request.user, run_id)
 
 
 @runs_router.get("/{int:run_id}/log")
@@ -339,6 +360,27 @@ def get_run_log(request, run_id: int, stream: Literal["all", "stdout", "stderr"]
 
 @runs_router.post("/{int:run_id}/stop", response=RunOut)
 def stop_run(request, run_id: int):
-    run = get_run_for_user(request.user, run_id)
+    """Stop a run; a queued one is cancelled at once (``stopped``, "cancelled while queued"),
+    also by staff or the robot's owner."""
+    run = run_queue.get_run_to_manage(request.user, run_id)
     request_stop(run)
     return run
+
+
+@runs_router.post("/{int:run_id}/queue", response={200: RunOut, 409: Error})
+def move_in_queue(request, run_id: int, data: QueueMoveIn):
+    """Staff or the robot's owner put a queued run at another place in its robot's line."""
+    run = run_queue.get_run_to_manage(request.user, run_id)
+    try:
+        run_queue.move(request.user, run, data.position)
+    except run_queue.NotQueued as exc:
+        return Status(409, {"detail": str(exc)})
+    run.refresh_from_db()
+    return Status(200, run)
+
+
+@runs_router.post("/queue/resume", response={200: QueueResumedOut, 404: Error})
+def resume_queue(request, data: QueueResumeIn):
+    """After an emergency stop held a robot's queue: staff or its owner let it move again."""
+    robot = get_robot_for_user(request.user, data.robot)
+    return {"robot": robot.name, "waiting": run_queue.resume(request.user, robot)}

@@ -74,6 +74,7 @@ class Revision(models.Model):
 
 class Run(models.Model):
     class State(models.TextChoices):
+        QUEUED = "queued"
         STARTING = "starting"
         RUNNING = "running"
         FINISHED = "finished"
@@ -81,7 +82,13 @@ class Run(models.Model):
         STOPPED = "stopped"
         LOST = "lost"
 
+    # Handed to an agent, which supervises it: lost if that agent goes away.
     ACTIVE = (State.STARTING, State.RUNNING)
+    # Not ended: active, or waiting its turn on a busy robot (robots.run_queue). A queued run
+    # never started, so an agent that goes away leaves it queued, not lost.
+    ONGOING = (State.QUEUED, *ACTIVE)
+    #: Why queued runs do not move while the queue is held (a queued run's `reason`).
+    HELD = "the queue is held after an emergency stop; staff or the robot's owner resume it"
 
     program = models.ForeignKey(Program, on_delete=models.SET_NULL, null=True, related_name="runs")
     # What ran, kept even if the program is edited or deleted later.
@@ -101,6 +108,8 @@ class Run(models.Model):
     started = models.DateTimeField(null=True, blank=True)
     ended = models.DateTimeField(null=True, blank=True)
     pid = models.IntegerField(null=True, blank=True, editable=False)
+    #: While queued: its place in its robot's queue, lowest first (ties: the older first).
+    queue_position = models.PositiveIntegerField(null=True, blank=True, editable=False)
 
     class Meta:
         ordering = ["-created"]
@@ -112,6 +121,31 @@ class Run(models.Model):
     @property
     def active(self) -> bool:
         return self.state in self.ACTIVE
+
+    @property
+    def queued(self) -> bool:
+        return self.state == self.State.QUEUED
+
+    @property
+    def ongoing(self) -> bool:
+        """Not ended yet: queued, starting or running (it may be stopped or cancelled)."""
+        return self.state in self.ONGOING
+
+    @property
+    def queue_rank(self) -> int | None:
+        """Its place in line, 1 for the next to start; None when not queued."""
+        if not self.queued or self.queue_position is None:
+            return None
+        ahead = models.Q(queue_position__lt=self.queue_position) | models.Q(
+            queue_position=self.queue_position, pk__lt=self.pk
+        )
+        return Run.queue_of(self.robot_id).filter(ahead).count() + 1
+
+    @property
+    def queue_place(self) -> str:
+        """Its place as the pages say it: "2nd in line"."""
+        rank = self.queue_rank
+        return f"{ordinal(rank)} in line" if rank else ""
 
     @property
     def directory(self) -> Path:
@@ -148,6 +182,83 @@ class Run(models.Model):
             owner=user,
         )
 
+    def start_message(self) -> dict:
+        """What the agent needs to start it (as start_run hands it over), from the row."""
+        filename = (slugify(self.program_name) or "program") + get_language(self.language).extension
+        return {
+            "run_id": self.pk,
+            "language": self.language,
+            "source": self.source,
+            "filename": filename,
+            "args": [str(a) for a in self.args],
+            "user": self.owner.get_username(),
+        }
+
+    # -- a robot's queue (robots.run_queue decides; these are its atomic steps) ---------------
+
+    @classmethod
+    def queue_of(cls, robot_id: int) -> models.QuerySet:
+        """The runs waiting on that robot, the next to start first."""
+        return cls.objects.filter(robot_id=robot_id, state=cls.State.QUEUED).order_by(
+            "queue_position", "pk"
+        )
+
+    @classmethod
+    def enqueue(cls, run_id: int, reason: str = "") -> int | None:
+        """A run not yet started waits at the end of its robot's queue: its rank, or None
+        if it no longer waits to start (stopped or failed meanwhile)."""
+        with transaction.atomic():
+            run = cls.objects.filter(pk=run_id).only("robot_id").first()
+            if run is None:
+                return None
+            last = cls.queue_of(run.robot_id).aggregate(last=models.Max("queue_position"))
+            position = (last["last"] or 0) + 1
+            queued = cls.objects.filter(
+                pk=run_id, state=cls.State.STARTING, pid__isnull=True
+            ).update(state=cls.State.QUEUED, queue_position=position, reason=reason)
+            if not queued:
+                return None
+            return cls.queue_of(run.robot_id).count()
+
+    @classmethod
+    def unqueue(cls, run_id: int) -> bool:
+        """Its turn: queued -> starting (the agent then claims it); False if it was cancelled."""
+        return (
+            cls.objects.filter(pk=run_id, state=cls.State.QUEUED).update(
+                state=cls.State.STARTING, queue_position=None, reason="", pid=None
+            )
+            == 1
+        )
+
+    @classmethod
+    def cancel_queued(cls, run_id: int, reason: str = "cancelled while queued") -> bool:
+        """Stop a run that waits its turn; False if it no longer waits (it started)."""
+        now = timezone.now()
+        return (
+            cls.objects.filter(pk=run_id, state=cls.State.QUEUED).update(
+                state=cls.State.STOPPED, queue_position=None, reason=reason, ended=now
+            )
+            == 1
+        )
+
+    @classmethod
+    def move_in_queue(cls, run_id: int, rank: int) -> int | None:
+        """Put a queued run at ``rank`` (1-based, clamped) of its robot's queue, the others
+        keeping their order: its rank then, or None if it no longer waits."""
+        with transaction.atomic():
+            run = cls.objects.filter(pk=run_id, state=cls.State.QUEUED).first()
+            if run is None:
+                return None
+            order = list(
+                cls.queue_of(run.robot_id).select_for_update().values_list("pk", flat=True)
+            )
+            order.remove(run_id)
+            rank = max(1, min(rank, len(order) + 1))
+            order.insert(rank - 1, run_id)
+            for position, pk in enumerate(order, 1):
+                cls.objects.filter(pk=pk, state=cls.State.QUEUED).update(queue_position=position)
+            return rank
+
     # -- state changes made by the robot agent ------------------------------------------------
 
     @classmethod
@@ -175,7 +286,8 @@ class Run(models.Model):
 
     @classmethod
     def mark_lost(cls, robot_name: str) -> list[int]:
-        """Runs a dead agent left unfinished: nothing is supervising them any more."""
+        """Runs a dead agent left unfinished: nothing is supervising them any more.
+        Queued runs are not among them: they never started, and wait for the agent again."""
         lost = list(
             cls.objects.filter(robot__name=robot_name, state__in=cls.ACTIVE).values_list(
                 "pk", flat=True
@@ -187,6 +299,12 @@ class Run(models.Model):
             ended=timezone.now(),
         )
         return lost
+
+
+def ordinal(n: int) -> str:
+    """1st, 2nd, 3rd, 4th, 11th, 21st..."""
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{suffix}"
 
 
 def start_run(program: Program, robot: Robot, user, args=()) -> Run:
@@ -229,8 +347,16 @@ def fail_to_start(run: Run, why: str) -> None:
 
 
 def request_stop(run: Run) -> None:
+    """Stop a run: a queued one is cancelled here (its agent need not be reachable), an
+    active one is stopped by its agent."""
     from robots.bus import tell_agent_sync
 
+    if run.queued:
+        from robots import run_queue
+
+        if run_queue.cancel(run):
+            return
+        run.refresh_from_db()  # it started meanwhile: stop it as any other
     if run.active:
         try:
             tell_agent_sync(run.robot.name, "run.stop", run_id=run.pk)

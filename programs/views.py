@@ -38,6 +38,7 @@ from programs.models import (
 )
 from programs.runlog import plain_text, render_lines, tail
 from programs.shares import ShareError, add_share
+from robots import run_queue
 from robots.models import get_robot_for_user, robots_for_user
 
 
@@ -349,8 +350,9 @@ def run_tables_context(user, robot: str | None) -> dict:
     if robot:
         runs = runs.filter(robot__name=robot)
     return {
-        "running": runs.filter(state__in=Run.ACTIVE),
-        "recent": runs.exclude(state__in=Run.ACTIVE)[:50],
+        # Those waiting in a robot's queue too: they have not ended, and may be cancelled.
+        "running": runs.filter(state__in=Run.ONGOING),
+        "recent": runs.exclude(state__in=Run.ONGOING)[:50],
         "robot_filter": robot,
         "robots": robots_for_user(user),
     }
@@ -379,7 +381,9 @@ def run_log(request: HttpRequest, run_id: int) -> HttpResponse:
 @login_required
 @require_POST
 def run_stop(request: HttpRequest, run_id: int) -> HttpResponse:
-    run = get_run_for_user(request.user, run_id)
+    """Stop a run; a queued one is cancelled (also by those who manage its robot's queue)."""
+    run = run_queue.get_run_to_manage(request.user, run_id)
+    queued = run.queued
     try:
         request_stop(run)
     except AgentUnreachable as exc:
@@ -389,7 +393,8 @@ def run_stop(request: HttpRequest, run_id: int) -> HttpResponse:
     else:
         if request.htmx:
             return HttpResponse(status=204)
-        messages.info(request, f"Stopping run {run.pk}.")
+        cancelled = queued and run.state == Run.State.STOPPED
+        messages.info(request, f"{'Cancelled' if cancelled else 'Stopping'} run {run.pk}.")
     next_url = request.POST.get("next", "")
     if url_has_allowed_host_and_scheme(next_url, allowed_hosts={request.get_host()}):
         return redirect(next_url)

@@ -280,6 +280,10 @@ RUN_DEFAULTS = {
     "log_size_mb": env_int("ROBOTIDE_RUN_LOG_SIZE_MB", 64),
     "stop_grace_seconds": 3,
 }
+# -- A shared robot's run queue (robots.run_queue): while others wait, the program holding the
+# robot is stopped after this many seconds; a robot's settings.queue_turn_seconds overrides it
+# (0: no limit).
+QUEUE_TURN_SECONDS = env_float("ROBOTIDE_QUEUE_TURN_SECONDS", 300.0)
 # -- Program isolation (programs.isolation): a robot's settings may override each.
 RUN_ISOLATION = {
     "isolation": os.environ.get("ROBOTIDE_RUN_ISOLATION", "auto"),

@@ -59,6 +59,9 @@ urlpatterns = [
     ),
     path("robots/<slug:name>/estop", robots.robot_estop, name="robot-estop"),
     path("robots/<slug:name>/run", robots.robot_run, name="robot-run"),
+    path("robots/<slug:name>/queue", robots.robot_queue, name="robot-queue"),
+    path("robots/<slug:name>/queue/move", robots.robot_queue_move, name="robot-queue-move"),
+    path("robots/<slug:name>/queue/resume", robots.robot_queue_resume, name="robot-queue-resume"),
     path("robots/<slug:name>/camera.jpg", robots.robot_camera, name="robot-camera"),
     path("robots/<slug:name>/gateway", gateway_views.robot_gateway, name="robot-gateway"),
     path(

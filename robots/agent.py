@@ -50,6 +50,7 @@ from robots.gateway import Gateway
 from robots.lease import ControlLease, Holder, LeaseHeld
 from robots.models import Robot, agent_channel, robot_group
 from robots.robot_api import RobotApi
+from robots.run_queue import RunQueue
 
 log = logging.getLogger(__name__)
 
@@ -107,6 +108,8 @@ class RobotAgent:
         self.handlers.update(self.gateway.handlers)
         self.bridges = Bridges(self)
         self.handlers.update(self.bridges.handlers)
+        self.queue = RunQueue(self)  # runs waiting their turn while the robot is busy
+        self.handlers.update(self.queue.handlers)
         self.lent_to: str | None = None  # a serial bridge client has the robot's device
         self._outbox: asyncio.Queue = asyncio.Queue()
         self._tasks: list[asyncio.Task] = []
@@ -143,6 +146,7 @@ class RobotAgent:
             asyncio.create_task(self._telemetry_loop(), name=f"{self.name}-telemetry"),
             asyncio.create_task(self._keep_robot_open(), name=f"{self.name}-link"),
             asyncio.create_task(self._heartbeat_loop(), name=f"{self.name}-heartbeat"),
+            asyncio.create_task(self.queue.serve(), name=f"{self.name}-queue"),
         ]
         self.ready.set()
         log.info("agent %s: %s, Robot API on %s", self.name, robot.url, self.api_address)
@@ -224,6 +228,7 @@ class RobotAgent:
                 delay = min(delay * 2, LINK_RETRY_MAX)
 
     async def shutdown(self) -> None:
+        await self.queue.close()  # nothing more starts from the queue
         if self._starting:  # let starts under way finish, so their programs are stopped too
             await asyncio.wait(self._starting, timeout=5)
         for active in list(self.runs.values()):
@@ -282,6 +287,7 @@ class RobotAgent:
         elif kind == "run.stop":
             if not self.stop_run(message["run_id"], "stopped by user"):
                 self.cancelled.add(message["run_id"])
+                self.queue.cancel(message["run_id"])  # if it waits in line
         elif kind == "robot.estop":
             stopped = await self.estop()
             await self.reply(message, {"stopped": stopped})
@@ -328,6 +334,8 @@ class RobotAgent:
 
     async def _start_run(self, message: dict) -> None:
         run_id = message["run_id"]
+        if await self.queue.waits(message):  # the robot is busy: it waits its turn
+            return
         # Only a run still waiting to start: not one marked lost or failed meanwhile.
         if not await database_sync_to_async(Run.claim)(run_id):
             return
@@ -425,6 +433,7 @@ class RobotAgent:
         return True
 
     async def estop(self) -> int:
+        self.queue.hold()  # runs waiting stay queued until someone resumes
         stopped = sum(self.stop_run(run_id, "emergency stop") for run_id in list(self.runs))
         self.motion_owner = None
         if self.lease.clear():
@@ -484,6 +493,7 @@ class RobotAgent:
     def _lease_changed(self) -> None:
         holder = self.lease.holder.as_dict() if self.lease.holder else None
         self.publish(self.group, {"type": "robot.lease", "robot": self.name, "holder": holder})
+        self.queue.wake()  # free now? the next in line starts
 
     # -- publishing -------------------------------------------------------------------------
 

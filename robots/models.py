@@ -6,7 +6,9 @@ from django.http import Http404
 from django.utils import timezone
 
 # Settings for the runs on a robot; anything else in its `settings` goes to its driver.
-RUN_SETTINGS = ("limits", "isolation", "network", "tmp_mb", "camera", "speech")
+RUN_SETTINGS = (
+    "limits", "isolation", "network", "tmp_mb", "camera", "speech", "queue_turn_seconds",
+)  # fmt: skip
 
 
 class Robot(models.Model):

@@ -4,6 +4,10 @@ The web tier watches: runs on a robot whose agent has gone silent are marked ``l
 AGENT_OFFLINE_AFTER seconds (nothing supervises them any more), and the pages hear of it. Every
 web worker may watch; the update is conditional, so each run is marked once. An agent that
 comes back serves again as soon as its first heartbeat lands.
+
+Runs waiting in a robot's queue (``queued``, robots.run_queue) are not lost with a silent
+agent: they never started, so nothing of theirs went unsupervised. They stay in line and the
+agent serves them when it is back; their owners may cancel them meanwhile (that needs no agent).
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ def sweep_lost() -> list[tuple[int, str]]:
     """Mark lost the runs of robots whose agent went silent: (run id, robot name) of each."""
     cutoff = silent_since()
     silent = Q(robot__last_seen__lt=cutoff) | Q(robot__last_seen__isnull=True)
+    # Run.ACTIVE: started or handed to the agent; not those waiting in its robot's queue.
     candidates = Run.objects.filter(silent, state__in=Run.ACTIVE, created__lt=cutoff)
     lost = []
     for run_id, robot_name in candidates.values_list("pk", "robot__name"):

@@ -6,11 +6,12 @@ from django.contrib.auth.decorators import login_required
 from django.core.exceptions import PermissionDenied
 from django.http import HttpRequest, HttpResponse
 from django.shortcuts import get_object_or_404, redirect, render
+from django.utils.http import url_has_allowed_host_and_scheme
 from django.views.decorators.http import require_POST
 
 from programs.access import get_program_for_user, programs_for_user, runs_for_user
-from programs.models import Run, RunRefused, start_run
-from robots import gateway_views
+from programs.models import Run, RunRefused, ordinal, start_run
+from robots import gateway_views, run_queue
 from robots.bus import AgentUnavailable, ask_agent_sync, reconfigure_sync
 from robots.camera import has_camera
 from robots.driver_settings import current_values
@@ -37,6 +38,7 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
         "options": current_values(robot),
         "running": runs_for_user(request.user).filter(robot=robot, state__in=Run.ACTIVE),
         "programs": programs_for_user(request.user),
+        **queue_context(request.user, robot),
     }
     # The state now, so the page is whole before (or without) its websocket.
     try:
@@ -53,6 +55,66 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
     # The gateway card once, server-side; it then reloads itself (robots/_gateway.html).
     context["gateway"] = gateway_views.gateway_context(robot, away="agent_error" in context)
     return render(request, "robots/detail.html", context)
+
+
+def queue_context(user, robot) -> dict:
+    """The robot's queue for robots/_running.html: rows as ``user`` may see them."""
+    return {
+        "robot": robot,
+        "queue": run_queue.queue_rows(user, robot),
+        "queue_held": run_queue.held(robot),
+        "can_manage_queue": run_queue.may_manage(user, robot),
+    }
+
+
+@login_required
+def robot_queue(request: HttpRequest, name: str) -> HttpResponse:
+    """The queue's part of the "Running here" card; the robot page reloads it on each change."""
+    robot = get_robot_for_user(request.user, name)
+    context = {**queue_context(request.user, robot), "queue_only": True}
+    return render(request, "robots/_running.html", context)
+
+
+@login_required
+@require_POST
+def robot_queue_move(request: HttpRequest, name: str) -> HttpResponse:
+    """Staff or the robot's owner put a waiting run at another place in line."""
+    robot = get_robot_for_user(request.user, name)
+    run = get_object_or_404(Run, pk=_number(request.POST.get("run")), robot=robot)
+    try:
+        rank = run_queue.move(request.user, run, _number(request.POST.get("to")) or 1)
+    except run_queue.NotQueued as exc:
+        return _queue_outcome(request, robot, error=str(exc))
+    return _queue_outcome(request, robot, info=f"Run #{run.pk} is now {ordinal(rank)} in line.")
+
+
+@login_required
+@require_POST
+def robot_queue_resume(request: HttpRequest, name: str) -> HttpResponse:
+    """After an emergency stop, staff or the robot's owner let the queue move again."""
+    robot = get_robot_for_user(request.user, name)
+    count = run_queue.resume(request.user, robot)
+    return _queue_outcome(request, robot, info=f"The queue moves again ({count} waiting).")
+
+
+def _queue_outcome(request, robot, info: str = "", error: str = "") -> HttpResponse:
+    if request.htmx:  # the page hears of the change on its websocket
+        return HttpResponse(error, status=409) if error else HttpResponse(status=204)
+    if error:
+        messages.error(request, error)
+    else:
+        messages.info(request, info)
+    next_url = request.POST.get("next", "")
+    if url_has_allowed_host_and_scheme(next_url, allowed_hosts={request.get_host()}):
+        return redirect(next_url)
+    return redirect("robot-detail", robot.name)
+
+
+def _number(value) -> int | None:
+    try:
+        return int(value)
+    except (TypeError, ValueError):
+        return None
 
 
 @login_required
@@ -102,7 +164,7 @@ def robot_button_press(request: HttpRequest, name: str, button_id: int) -> HttpR
     if "error" in outcome:
         messages.error(request, outcome["error"])
     else:
-        messages.success(request, f"{button.label}: run #{run.pk} started.")
+        messages.success(request, f"{button.label}: run #{run.pk} sent to the robot.")
     return redirect("robot-detail", robot.name)
 
 

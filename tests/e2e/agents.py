@@ -28,7 +28,7 @@ async def finished(run: Run, timeout=30.0) -> Run:
     deadline = time.monotonic() + timeout
     while True:
         await database_sync_to_async(run.refresh_from_db)()
-        if run.state not in Run.ACTIVE:
+        if run.state not in Run.ONGOING:
             return run
         assert time.monotonic() < deadline, f"run {run.pk} still {run.state}"
         await asyncio.sleep(0.1)

@@ -1,0 +1,442 @@
+"""A robot's run queue: on a busy shared robot, a run waits its turn instead of fighting for it.
+
+The robot is busy for someone while its control lease is held by *another* user: their
+program, or them driving by hand. A run asked for then, or while others already wait, is
+``queued``: its place is ``Run.queue_position``, the pages show "queued — 2nd in line". A
+user's own program or hand driving does not make their next run wait (several programs of one
+user run at once, a logger beside a driver, as before), nor does a serial bridge client: those
+runs start, and drive() is refused naming the holder, as robots.lease and robots.bridges say.
+When the lease is free again (a program ended, a person released it, left the page or left the
+controls idle, a bridge client left, an emergency stop cleared it), the agent starts the first
+in line and gives it the lease at once, so nobody slips in between.
+
+A program that holds the lease while others wait has a turn of ``queue_turn_seconds`` (a robot
+setting; ROBOTIDE_QUEUE_TURN_SECONDS, 300 s; 0: no limit), counted from when it took the lease
+or from when the first other run began to wait, whichever is later; then it is stopped. A
+person driving by hand has no turn limit (they are there, and the lease lets go of a person
+idle for 30 s), nor has a bridge client.
+
+The order is in the database: staff and the robot's owner reorder and cancel from the robot's
+page or the API, a run's owner (or their teacher) cancels it with the stop action, all without
+the agent; the agent is told, and reads the order when it starts the next.
+
+An emergency stop while runs wait *holds* the queue: nothing more starts on its own until
+staff or the robot's owner resume it (the robot's page, or ``POST /api/runs/queue/resume``),
+since whatever made someone press it is likely still there; each waiting run says so. The hold
+is kept in the waiting runs (their ``reason``), so it survives the agent's restart. Queued runs
+survive an agent that stops or goes silent (they never started: not ``lost``) and are served
+when it is back; their owners may cancel them meanwhile.
+
+The agent owns one ``RunQueue`` (its hooks: run.start, the lease changing, the emergency stop,
+shutdown); the functions below it are for the web tier.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+
+from channels.db import database_sync_to_async
+from channels.layers import get_channel_layer
+from django.conf import settings
+from django.core.exceptions import PermissionDenied
+from django.http import Http404
+
+from programs.models import Run, ordinal
+from robots.bus import RUNS_GROUP, _blocking, run_group, send_to_agent
+from robots.lease import Holder, LeaseHeld
+from robots.models import Robot, robot_group
+
+log = logging.getLogger(__name__)
+
+TICK = 0.25  # seconds between looks at the lease (a person gone idle) and the turn's end
+RETRY_DELAY = 1.0
+CHANGED, RESUME = "run.queue_changed", "run.queue_resume"
+
+
+def turn_seconds(robot_settings: dict) -> float:
+    """A robot's turn length: its ``queue_turn_seconds``, else the default; 0 is no limit."""
+    value = robot_settings.get("queue_turn_seconds", settings.QUEUE_TURN_SECONDS)
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        log.error("queue_turn_seconds %r is not a number: the default is used", value)
+        value = float(settings.QUEUE_TURN_SECONDS)
+    return value if math.isfinite(value) and value > 0 else 0.0
+
+
+class RunQueue:
+    """The queue as one agent serves it: its decisions in memory, its order in the database."""
+
+    def __init__(self, agent):
+        self.agent = agent
+        self.waiting = 0  # runs queued on this robot, as last counted
+        self.held = False  # after an emergency stop: nothing starts until someone resumes
+        # The lease-holding run's turn while others wait: (its run id, loop time it ends).
+        self._turn: tuple[int | str, float] | None = None
+        self._limit = 0.0
+        self._wake = asyncio.Event()
+        self._closing = False
+        self._task: asyncio.Task | None = None
+        self._marking: set[asyncio.Task] = set()  # tasks of the holds and cancels
+        self.handlers = {CHANGED: self._changed, RESUME: self._resume}
+
+    # -- hooks of the agent -----------------------------------------------------------------
+
+    async def waits(self, message: dict) -> bool:
+        """On run.start: True if the run was queued (or no longer waits to start at all),
+        False if it starts now."""
+        run_id = message["run_id"]
+        if message.get("from_queue") or run_id in self.agent.cancelled:
+            return False
+        if not self._busy_for(message.get("user", "")) and not self.waiting and not self.held:
+            # Counted again: the queue is in the database, and may have changed meanwhile.
+            await self._count()
+            if not self.waiting:
+                return False
+        reason = Run.HELD if self.held else ""
+        rank = await database_sync_to_async(Run.enqueue)(run_id, reason)
+        if rank is None:  # stopped or failed before it was handled: nothing to queue
+            return True
+        if run_id in self.agent.cancelled:  # its stop came while it was being queued
+            self.cancel(run_id)
+        log.info("agent %s: run %s queued, %s in line", self.agent.name, run_id, rank)
+        self._set_waiting(self.waiting + 1)
+        self.agent._run_changed(run_id)
+        self.wake()
+        return True
+
+    def cancel(self, run_id: int) -> None:
+        """A stop for a run the agent does not run: if it waits in line, it is cancelled."""
+        task = asyncio.create_task(self._cancel(run_id))
+        self._marking.add(task)
+        task.add_done_callback(self._marking.discard)
+
+    async def _cancel(self, run_id: int) -> None:
+        try:
+            if not await database_sync_to_async(Run.cancel_queued)(run_id):
+                return  # not queued (yet, or any more): the agent's own stop handles it
+            self.agent.cancelled.discard(run_id)
+            self.agent._run_changed(run_id)
+            await self._ranks_changed()
+            await self._count()
+        except Exception:  # it stays in self.agent.cancelled: stopped when its turn comes
+            log.exception("agent %s: could not cancel queued run %s", self.agent.name, run_id)
+
+    def wake(self) -> None:
+        """Something changed (the lease, the queue): look again now."""
+        self._wake.set()
+
+    def hold(self) -> None:
+        """An emergency stop: runs waiting now stay queued until someone resumes."""
+        if self.waiting:
+            self.held = True
+            task = asyncio.create_task(self._mark_held())
+            self._marking.add(task)
+            task.add_done_callback(self._marking.discard)
+
+    async def serve(self) -> None:
+        """Until closed: start the next run whenever the robot is free, end turns that ran out."""
+        self._task = asyncio.current_task()
+        with contextlib.suppress(Exception):
+            await self._count()
+        while not self._closing:
+            self._wake.clear()
+            try:
+                await self._step()
+            except Exception:  # the database away for a moment: look again soon
+                log.exception("agent %s: run queue failed", self.agent.name)
+                await asyncio.sleep(RETRY_DELAY)
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._wake.wait(), TICK)
+
+    async def close(self) -> None:
+        """Start nothing more (the agent is shutting down); a start under way finishes first,
+        so the agent stops its program with the others."""
+        self._closing = True
+        self.wake()
+        if self._task is not None and not self._task.done():
+            await asyncio.wait({self._task}, timeout=10)
+
+    # -- messages from the web tier ---------------------------------------------------------
+
+    async def _changed(self, message: dict) -> None:
+        await self._count()
+        self.wake()
+
+    async def _resume(self, message: dict) -> None:
+        self.held = False
+        # Runs queued while this message was on its way were marked held too.
+        await database_sync_to_async(_unhold)(self.agent.name)
+        await self._count()
+        self.wake()
+
+    # -- the work ---------------------------------------------------------------------------
+
+    def _busy_for(self, user: str) -> bool:
+        """Another user's program, or another person driving by hand, holds the robot."""
+        holder = self.agent.lease.holder
+        if holder is None or holder.kind == "bridge" or holder.user == user:
+            return False
+        return not self._robot_free()
+
+    def _robot_free(self) -> bool:
+        holder = self.agent.lease.holder
+        # A person who left the controls alone lets go for the next one (lease.IDLE_SECONDS).
+        return holder is None or (holder.kind == "teleop" and self.agent.lease._idle())
+
+    def _set_waiting(self, count: int) -> None:
+        if not (count and self.waiting):
+            # Someone begins to wait, or nobody waits any more: a turn is counted from now.
+            self._turn = None
+        self.waiting = count
+
+    async def _count(self) -> None:
+        waiting, held = await database_sync_to_async(_queue_state)(self.agent.name)
+        self._set_waiting(waiting)
+        self.held = bool(waiting) and (held or self.held)
+
+    async def _step(self) -> None:
+        if not self.waiting or self.held or self._closing:
+            return
+        if self._robot_free():
+            await self._start_next()
+            return
+        holder = self.agent.lease.holder
+        if holder is not None and holder.kind == "run":
+            await self._check_turn(holder)
+
+    async def _start_next(self) -> None:
+        agent = self.agent
+        while not self._closing and self._robot_free():
+            run = await database_sync_to_async(_first_in_line)(agent.name)
+            if run is None:
+                self._set_waiting(0)
+                return
+            try:
+                message = run.start_message()  # its owner came with it: no await from here
+            except Exception as exc:  # e.g. its language is gone: it must not block the line
+                if await database_sync_to_async(Run.unqueue)(run.pk):
+                    await agent._end_run(run.pk, "failed", None, f"could not start: {exc}")
+                continue
+            previous = agent.lease.holder
+            try:  # the lease first, before anything else may run: nobody slips in between
+                agent.lease.acquire(Holder("run", run.pk, message["user"]))
+            except LeaseHeld:  # someone took the robot while we looked
+                return
+            if not await database_sync_to_async(Run.unqueue)(run.pk):
+                agent.lease.release(run.pk)  # cancelled while we looked
+                continue
+            agent._lease_changed()
+            if previous is not None:  # a person gone idle: their motion ends (it has already)
+                await agent.stop_motion_of(previous.key)
+            self._set_waiting(max(0, self.waiting - 1))
+            log.info("agent %s: run %s starts from the queue", agent.name, run.pk)
+            # As a task the agent knows of: its shutdown waits for it, and stops its program.
+            task = asyncio.create_task(agent.start_run({**message, "from_queue": True}))
+            agent._starting.add(task)
+            task.add_done_callback(agent._starting.discard)
+            await asyncio.shield(task)
+            if run.pk not in agent.runs and agent.lease.release(run.pk):
+                agent._lease_changed()  # it could not start (or ended already): the next may
+            await self._ranks_changed()
+            await self._count()
+            return
+
+    async def _check_turn(self, holder: Holder) -> None:
+        loop = asyncio.get_running_loop()
+        if self._turn is None or self._turn[0] != holder.key:
+            robot = await database_sync_to_async(Robot.objects.get)(name=self.agent.name)
+            self._limit = turn_seconds(robot.settings)
+            ends = loop.time() + self._limit if self._limit else math.inf
+            self._turn = (holder.key, ends)
+        if loop.time() < self._turn[1]:
+            return
+        await self._count()  # others still waiting? (they may have been cancelled)
+        if not self.waiting or self._turn is None:
+            return
+        self._turn = (holder.key, math.inf)  # once
+        why = f"its turn on the shared robot ended ({self._limit:g} s)"
+        if self.agent.stop_run(holder.key, why):
+            log.info("agent %s: run %s stopped: %s", self.agent.name, holder.key, why)
+
+    async def _mark_held(self) -> None:
+        try:
+            ids = await database_sync_to_async(_hold)(self.agent.name)
+        except Exception:
+            log.exception("agent %s: could not mark the queue held", self.agent.name)
+            return
+        for run_id in ids:
+            self.agent.publish(run_group(run_id), {"type": "run.state", "run_id": run_id})
+        self._robot_runs_changed()
+
+    async def _ranks_changed(self) -> None:
+        """Everyone in line moved up: their pages say so."""
+        ids = await database_sync_to_async(_queued_ids)(self.agent.name)
+        for run_id in ids:
+            self.agent.publish(run_group(run_id), {"type": "run.state", "run_id": run_id})
+        self._robot_runs_changed()
+
+    def _robot_runs_changed(self) -> None:
+        name = self.agent.name
+        self.agent.publish(RUNS_GROUP, {"type": "runs.changed", "run_id": None, "robot": name})
+        self.agent.publish(robot_group(name), {"type": "robot.runs", "robot": name})
+
+
+def _queue_state(robot_name: str) -> tuple[int, bool]:
+    queue = Run.objects.filter(robot__name=robot_name, state=Run.State.QUEUED)
+    return queue.count(), queue.filter(reason=Run.HELD).exists()
+
+
+def _first_in_line(robot_name: str) -> Run | None:
+    robot_id = Robot.objects.filter(name=robot_name).values_list("pk", flat=True).first()
+    return Run.queue_of(robot_id).select_related("owner").first()
+
+
+def _queued_ids(robot_name: str) -> list[int]:
+    return list(
+        Run.objects.filter(robot__name=robot_name, state=Run.State.QUEUED).values_list(
+            "pk", flat=True
+        )
+    )
+
+
+def _unhold(robot_name: str) -> None:
+    Run.objects.filter(robot__name=robot_name, state=Run.State.QUEUED, reason=Run.HELD).update(
+        reason=""
+    )
+
+
+def _hold(robot_name: str) -> list[int]:
+    ids = _queued_ids(robot_name)
+    Run.objects.filter(pk__in=ids, state=Run.State.QUEUED).update(reason=Run.HELD)
+    return ids
+
+
+# -- the web tier: who may do what, and doing it --------------------------------------------
+
+
+def may_manage(user, robot: Robot) -> bool:
+    """Reorder, cancel and resume a robot's queue: staff and the robot's owner."""
+    return user.is_authenticated and robot.configurable_by(user)
+
+
+def runs_to_see(user):
+    """The runs ``user`` may see (programs.access), and the queued runs of robots they manage
+    (staff, the robot's owner): whose and which program waits, to decide the order."""
+    from django.db.models import Q
+
+    from programs.access import runs_for_user
+
+    runs = runs_for_user(user)
+    if not user.is_authenticated or user.is_superuser:
+        return runs
+    managed = Robot.objects.all() if user.is_staff else Robot.objects.filter(owner=user)
+    waiting = Q(state=Run.State.QUEUED, robot__in=managed)
+    return Run.objects.select_related("robot", "owner").filter(
+        Q(pk__in=runs.values("pk")) | waiting
+    )
+
+
+def get_run_to_manage(user, run_id) -> Run:
+    """A run ``user`` may see (programs.access), or a queued one of a robot they manage."""
+    from programs.access import get_run_for_user
+
+    try:
+        return get_run_for_user(user, run_id)
+    except Http404:
+        run = Run.objects.select_related("robot", "owner").filter(pk=run_id).first()
+        if run is not None and run.queued and may_manage(user, run.robot):
+            return run
+        raise
+
+
+def queue_rows(user, robot: Robot) -> list[dict]:
+    """The robot's queue as ``user`` may see it: every place in line; which program and whose
+    for their own runs, their students' (programs.access) and to those who manage the queue."""
+    from programs.access import runs_for_user
+
+    manager = may_manage(user, robot)
+    queued = runs_for_user(user).filter(robot=robot, state=Run.State.QUEUED)
+    visible = set(queued.values_list("pk", flat=True))
+    queue = list(Run.queue_of(robot.pk).select_related("owner"))
+    rows = []
+    for rank, run in enumerate(queue, 1):
+        shown = manager or run.pk in visible
+        moves = []
+        if manager and rank > 1:
+            moves += [("⇧ first", 1, "Move to the front"), ("↑ up", rank - 1, "Move up")]
+        if manager and rank < len(queue):
+            moves.append(("↓ down", rank + 1, "Move down"))
+        rows.append({
+            "rank": rank, "place": f"{ordinal(rank)} in line", "run": run if shown else None,
+            "linked": run.pk in visible, "mine": run.owner_id == user.pk,
+            "can_cancel": shown, "can_move": manager, "moves": moves,
+        })  # fmt: skip
+    return rows
+
+
+def held(robot: Robot) -> bool:
+    return Run.queue_of(robot.pk).filter(reason=Run.HELD).exists()
+
+
+def cancel(run: Run) -> bool:
+    """Cancel a queued run (the stop action on it); False if it no longer waits."""
+    if not Run.cancel_queued(run.pk):
+        return False
+    run.refresh_from_db()
+    _changed(run.robot.name, also=[run.pk])
+    return True
+
+
+def move(user, run: Run, rank: int) -> int:
+    """Put a queued run at ``rank`` (1-based) of its robot's line: its rank then."""
+    if not may_manage(user, run.robot):
+        raise PermissionDenied("Only staff and the robot's owner reorder its queue.")
+    placed = Run.move_in_queue(run.pk, rank)
+    if placed is None:
+        raise NotQueued(f"Run {run.pk} is not queued (it is {_state_of(run.pk)}).")
+    _changed(run.robot.name)
+    return placed
+
+
+def resume(user, robot: Robot) -> int:
+    """After an emergency stop: the queue moves again. How many runs were waiting."""
+    if not may_manage(user, robot):
+        raise PermissionDenied("Only staff and the robot's owner resume its queue.")
+    count = Run.queue_of(robot.pk).filter(reason=Run.HELD).update(reason="")
+    with contextlib.suppress(Exception):  # the agent away: it reads the queue when back
+        _blocking(send_to_agent)(robot.name, RESUME)
+    _changed(robot.name, tell_agent=False)
+    return count
+
+
+class NotQueued(Exception):
+    pass
+
+
+def _state_of(run_id: int) -> str:
+    return Run.objects.filter(pk=run_id).values_list("state", flat=True).first() or "gone"
+
+
+def _changed(robot_name: str, also=(), tell_agent: bool = True) -> None:
+    """The queue changed here, in the web tier: its agent and the pages hear of it."""
+    if tell_agent:
+        with contextlib.suppress(Exception):  # the agent away: it reads the queue when back
+            _blocking(send_to_agent)(robot_name, CHANGED)
+    ids = [*also, *_queued_ids(robot_name)]
+    try:
+        _blocking(_tell_pages)(robot_name, ids)
+    except Exception:  # the channel layer away: the pages catch up on their next event
+        log.exception("could not tell the pages of robot %s's queue", robot_name)
+
+
+async def _tell_pages(robot_name: str, run_ids: list[int]) -> None:
+    layer = get_channel_layer()
+    for run_id in run_ids:
+        await layer.group_send(run_group(run_id), {"type": "run.state", "run_id": run_id})
+    changed = {"type": "runs.changed", "run_id": None, "robot": robot_name}
+    await layer.group_send(RUNS_GROUP, changed)
+    await layer.group_send(robot_group(robot_name), {"type": "robot.runs", "robot": robot_name})
