@@ -154,3 +154,30 @@ def test_an_agent_killed_goes_offline_its_run_lost_then_it_serves_again(fleet):
     assert app.wait_run(again["id"])["state"] == "finished"
     assert app.api("GET", f"/api/runs/{again['id']}/log").text.startswith("back\n")
     print(json.dumps({"offline_after_s": round(offline_after, 1)}))
+
+
+DRIVE_AND_WAIT = "import robot, time\nrobot.Robot().drive(0.1, 0.0)\ntime.sleep(600)\n"
+
+
+def test_three_users_queue_for_one_robot(fleet):
+    app, _ = fleet
+    tokens = {name: app.new_user(name) for name in ("alice", "bob", "carol")}
+
+    def run_as(user, source):
+        program = app.create_program(f"{user}'s", source, token=tokens[user])
+        return app.run_program(program["id"], robot="r1", token=tokens[user])
+
+    def run(run_id, user):
+        return app.api("GET", f"/api/runs/{run_id}", token=tokens[user]).json()
+
+    alice = run_as("alice", DRIVE_AND_WAIT)
+    wait(lambda: run(alice["id"], "alice")["state"] == "running", what="alice's run")
+    time.sleep(1.0)  # her drive() takes the robot's lease
+    bob = run_as("bob", "print('bob drove')\n")
+    wait(lambda: run(bob["id"], "bob")["queue_position"] == 1, what="bob first in line")
+    carol = run_as("carol", "print('carol drove')\n")
+    wait(lambda: run(carol["id"], "carol")["queue_position"] == 2, what="carol second")
+    app.api("POST", f"/api/runs/{alice['id']}/stop", token=tokens["alice"])
+    assert app.wait_run(bob["id"], timeout=30)["state"] == "finished"
+    assert app.wait_run(carol["id"], timeout=30)["state"] == "finished"
+    assert run(alice["id"], "alice")["state"] == "stopped"
