@@ -58,3 +58,15 @@ def test_the_api_says_which_robots_are_online(client, lab):
     robots = client.get("/api/robots", HTTP_AUTHORIZATION=f"Bearer {token}").json()
     online = {r["name"]: (r["online"], r["last_seen"] is not None) for r in robots}
     assert online == {"alive": (True, True), "silent": (False, True), "never": (False, False)}
+
+
+def test_the_pages_say_online_offline_and_when_last_seen(client, lab):
+    alice, *_ = lab
+    client.force_login(alice)
+    listing = client.get("/robots/").content.decode()
+    assert (
+        listing.count('class="badge online"') == 1 and listing.count('class="badge offline"') == 2
+    )
+    assert "never seen" in listing
+    page = client.get("/robots/silent/").content.decode()
+    assert "The robot's agent is offline: last seen 1\xa0minute ago" in page
