@@ -90,6 +90,7 @@ class RunProcess:
         self._live_end = 0
         self._flush_handle: asyncio.Handle | None = None
         self._last_flush = 0.0
+        self._flush_due = 0.0
         self._kill_handle: asyncio.TimerHandle | None = None
         self._stop_reason: str | None = None
         self._stop_state = "stopped"
@@ -204,12 +205,15 @@ class RunProcess:
         if self._flush_handle is not None:
             return
         loop = asyncio.get_running_loop()
-        delay = max(0.0, self._last_flush + self.batch_interval - time.monotonic())
-        self._flush_handle = loop.call_later(delay, self._flush)
+        now = time.monotonic()
+        self._flush_due = max(now, self._last_flush + self.batch_interval)
+        self._flush_handle = loop.call_later(self._flush_due - now, self._flush)
 
     def _flush(self) -> None:
         self._flush_handle = None
-        self._last_flush = time.monotonic()
+        # From when the batch was due, not when the timer ran (a little late each time): else
+        # a program printing once an interval finds each batch due later and later.
+        self._last_flush = min(self._flush_due, time.monotonic())
         if self._log.closed:
             return
         self._log.flush()

@@ -357,13 +357,21 @@ def server_options() -> dict:
 def serve_workers(host: str, port: int, workers: int) -> None:
     """Fleet mode's web tier: uvicorn's worker processes, which it restarts if one dies; here
     the watch on the agents' heartbeats (robots.presence), in a thread of its own."""
+    from uvicorn.supervisors import Multiprocess
+
     from robots import presence
 
     watcher = threading.Thread(target=asyncio.run, args=(presence.watch(),), daemon=True)
     watcher.start()
-    uvicorn.run(
+    config = uvicorn.Config(
         "robotide.asgi:application", host=host, port=port, workers=workers, **server_options()
     )
+    sock = config.bind_socket()
+    # uvicorn binds it so that asyncio never sets TCP_NODELAY on the connections it accepts:
+    # each keep-alive response would wait ~40 ms for the client's delayed ACK. Linux copies the
+    # listening socket's option to them.
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    Multiprocess(config, sockets=[sock]).run()
 
 
 async def serve(host: str, port: int, with_agents: bool) -> None:

@@ -141,16 +141,15 @@ DEFAULT_AUTO_FIELD = "django.db.models.BigAutoField"
 
 REDIS_URL = os.environ.get("REDIS_URL", "")
 if REDIS_URL:
+    # Redis publish/subscribe: a message to a group goes out once and each process that has
+    # members hands it to them, so a worker with 50 viewers of a run's log takes 1 message, not
+    # 50 (channels_redis's list-based layer queued a copy per viewer, and on a busy machine its
+    # inboxes filled up and dropped log lines). Delivery is at most once, to whoever listens:
+    # a run.start that no agent heard is failed by robots.presence after AGENT_START_TIMEOUT.
     CHANNEL_LAYERS = {
         "default": {
-            "BACKEND": "channels_redis.core.RedisChannelLayer",
-            "CONFIG": {
-                # redis-py's default read timeout (5 s) equals channels-redis' blocking pop
-                # timeout (5 s): a longer one keeps idle receivers from timing out.
-                "hosts": [{"address": REDIS_URL, "socket_timeout": 15}],
-                "capacity": 1000,
-                "expiry": 30,
-            },
+            "BACKEND": "channels_redis.pubsub.RedisPubSubChannelLayer",
+            "CONFIG": {"hosts": [{"address": REDIS_URL}]},
         }
     }
 else:
@@ -295,6 +294,8 @@ RUN_ISOLATION = {
 # AGENT_OFFLINE_AFTER seconds is offline, and the runs it had are lost.
 AGENT_HEARTBEAT = env_float("ROBOTIDE_AGENT_HEARTBEAT", 2.0)
 AGENT_OFFLINE_AFTER = env_float("ROBOTIDE_AGENT_OFFLINE_AFTER", 7.0)
+# A run its online agent has not taken within this long is failed (the request was lost).
+AGENT_START_TIMEOUT = 30.0
 
 # -- MAVLink gateway (robots.gateway): the endpoints a mavlink:// robot starts with.
 # Ground stations (QGroundControl, Mission Planner) reach the robot on UDP 14550; programs run

@@ -51,13 +51,50 @@ def sweep_lost() -> list[tuple[int, str]]:
     return lost
 
 
+def sweep_unclaimed(seen: dict[int, float], now: float) -> list[tuple[int, str]]:
+    """Fail the runs an online agent has not taken for AGENT_START_TIMEOUT: their run.start
+    was lost (the channel layer delivers to whoever listens: an agent restarting missed it).
+
+    ``seen``: run id -> when a sweep first found it waiting to be taken (kept by the caller),
+    so a run that just left its robot's queue, and is being taken, is not failed by mistake.
+    """
+    waiting = dict(
+        Run.objects.filter(state=Run.State.STARTING, pid__isnull=True).values_list(
+            "pk", "robot__name"
+        )
+    )
+    for run_id in list(seen):
+        if run_id not in waiting:
+            del seen[run_id]
+    failed = []
+    for run_id, robot_name in waiting.items():
+        first = seen.setdefault(run_id, now)
+        if now - first < settings.AGENT_START_TIMEOUT:
+            continue
+        why = f"could not start: the agent of robot {robot_name!r} did not take it; run it again"
+        updated = Run.objects.filter(pk=run_id, state=Run.State.STARTING, pid__isnull=True).update(
+            state=Run.State.FAILED, reason=why, ended=timezone.now()
+        )
+        if updated:
+            failed.append((run_id, robot_name))
+        del seen[run_id]
+    return failed
+
+
 async def watch() -> None:
     """Until cancelled: sweep every heartbeat period, and tell the pages of runs lost."""
     layer = get_channel_layer()
+    unclaimed: dict[int, float] = {}
     while True:
         try:
-            for run_id, robot in await database_sync_to_async(sweep_lost)():
+            ended = await database_sync_to_async(sweep_lost)()
+            for run_id, robot in ended:
                 log.warning("run %s lost: the agent of robot %s stopped answering", run_id, robot)
+            loop_time = asyncio.get_running_loop().time()
+            failed = await database_sync_to_async(sweep_unclaimed)(unclaimed, loop_time)
+            for run_id, robot in failed:
+                log.warning("run %s failed: the agent of robot %s did not take it", run_id, robot)
+            for run_id, robot in ended + failed:
                 await layer.group_send(run_group(run_id), {"type": "run.state", "run_id": run_id})
                 changed = {"type": "runs.changed", "run_id": run_id, "robot": robot}
                 await layer.group_send(RUNS_GROUP, changed)

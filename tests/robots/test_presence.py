@@ -9,7 +9,7 @@ from django.utils import timezone
 from programs.models import Program, Run
 from robotide.models import ApiToken
 from robots.models import Robot
-from robots.presence import sweep_lost
+from robots.presence import sweep_lost, sweep_unclaimed
 
 pytestmark = pytest.mark.django_db
 
@@ -70,3 +70,18 @@ def test_the_pages_say_online_offline_and_when_last_seen(client, lab):
     assert "never seen" in listing
     page = client.get("/robots/silent/").content.decode()
     assert "The robot's agent is offline: last seen 1\xa0minute ago" in page
+
+
+def test_a_run_no_agent_took_is_failed_after_the_start_timeout(lab, settings):
+    settings.AGENT_START_TIMEOUT = 30
+    alice, program, alive, *_ = lab
+    waiting = run_on(program, alive, Run.State.STARTING, age=0)
+    taken = run_on(program, alive, Run.State.STARTING, age=0)
+    seen = {}
+    assert sweep_unclaimed(seen, now=100.0) == []  # noted, not failed: it may be on its way
+    Run.objects.filter(pk=taken.pk).update(pid=0)  # the agent took this one
+    assert sweep_unclaimed(seen, now=129.0) == []
+    assert sweep_unclaimed(seen, now=131.0) == [(waiting.pk, "alive")]
+    waiting.refresh_from_db()
+    assert waiting.state == "failed" and "did not take it" in waiting.reason
+    assert seen == {}
