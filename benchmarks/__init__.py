@@ -16,4 +16,5 @@ BENCHMARKS = (
     "robot_page",
     "camera",
     "gateway",
+    "fleet",
 )
