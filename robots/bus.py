@@ -63,7 +63,9 @@ def serve_on(loop: asyncio.AbstractEventLoop) -> None:
     _server_loop = loop
 
 
-def _blocking(coro_fn):
+def blocking(coro_fn):
+    """``coro_fn`` callable from sync code (a view's worker thread), on the server's loop."""
+
     def call(*args, **kwargs):
         loop = _server_loop
         if loop is None or not loop.is_running():
@@ -75,7 +77,7 @@ def _blocking(coro_fn):
     return call
 
 
-tell_agent_sync = _blocking(send_to_agent)
-ask_agent_sync = _blocking(ask_agent)
-announce_robot_sync = _blocking(announce_robot)
-reconfigure_sync = _blocking(reconfigure)
+tell_agent_sync = blocking(send_to_agent)
+ask_agent_sync = blocking(ask_agent)
+announce_robot_sync = blocking(announce_robot)
+reconfigure_sync = blocking(reconfigure)

@@ -45,7 +45,7 @@ from django.core.exceptions import PermissionDenied
 from django.http import Http404
 
 from programs.models import Run, ordinal
-from robots.bus import RUNS_GROUP, _blocking, run_group, send_to_agent
+from robots.bus import RUNS_GROUP, blocking, run_group, tell_agent_sync
 from robots.lease import Holder, LeaseHeld
 from robots.models import Robot, robot_group
 
@@ -408,7 +408,7 @@ def resume(user, robot: Robot) -> int:
         raise PermissionDenied("Only staff and the robot's owner resume its queue.")
     count = Run.queue_of(robot.pk).filter(reason=Run.HELD).update(reason="")
     with contextlib.suppress(Exception):  # the agent away: it reads the queue when back
-        _blocking(send_to_agent)(robot.name, RESUME)
+        tell_agent_sync(robot.name, RESUME)
     _changed(robot.name, tell_agent=False)
     return count
 
@@ -425,10 +425,10 @@ def _changed(robot_name: str, also=(), tell_agent: bool = True) -> None:
     """The queue changed here, in the web tier: its agent and the pages hear of it."""
     if tell_agent:
         with contextlib.suppress(Exception):  # the agent away: it reads the queue when back
-            _blocking(send_to_agent)(robot_name, CHANGED)
+            tell_agent_sync(robot_name, CHANGED)
     ids = [*also, *_queued_ids(robot_name)]
     try:
-        _blocking(_tell_pages)(robot_name, ids)
+        blocking(_tell_pages)(robot_name, ids)
     except Exception:  # the channel layer away: the pages catch up on their next event
         log.exception("could not tell the pages of robot %s's queue", robot_name)
 
