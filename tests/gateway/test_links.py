@@ -14,37 +14,15 @@ from gateway.router import (
     TcpServerEndpoint,
     UdpEndpoint,
 )
-from tests.gateway.frames import attitude, heartbeat
+from tests.gateway.frames import attitude, heartbeat, sink
 from tests.rhal.mavlink_emulator import MavlinkEmulator
+from tests.waiting import until
 
 
 def free_port(kind=socket.SOCK_DGRAM) -> int:
     with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-class Sink(asyncio.DatagramProtocol):
-    def __init__(self):
-        self.framer = Framer()
-        self.frames = []
-
-    def datagram_received(self, data, addr):
-        self.frames += [f[0] for f in self.framer.feed(data)]
-
-
-async def sink():
-    loop = asyncio.get_running_loop()
-    transport, protocol = await loop.create_datagram_endpoint(Sink, local_addr=("127.0.0.1", 0))
-    return transport, protocol, f"127.0.0.1:{transport.get_extra_info('sockname')[1]}"
-
-
-async def until(condition, timeout=5.0):
-    for _ in range(int(timeout / 0.01)):
-        if condition():
-            return
-        await asyncio.sleep(0.01)
-    raise AssertionError("timed out")
 
 
 async def test_endpoints_come_and_go_while_traffic_flows_without_loss_on_the_others():

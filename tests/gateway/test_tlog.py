@@ -21,7 +21,8 @@ from pymavlink import mavutil
 from gateway.framing import Framer
 from gateway.router import Endpoint, Router, UdpEndpoint
 from gateway.tlog import TlogRecorder, read_tlog, replay
-from tests.gateway.frames import attitude, command, heartbeat, signed_heartbeat
+from tests.gateway.frames import attitude, command, heartbeat, signed_heartbeat, sink
+from tests.waiting import until
 
 ROBOTIDE = os.path.join(os.path.dirname(sys.executable), "robotide")
 T0 = 1_700_000_000_000_000  # µs: 2023
@@ -38,34 +39,6 @@ def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-class Sink(asyncio.DatagramProtocol):
-    """Frames received, each with the loop time it came."""
-
-    def __init__(self):
-        self.framer = Framer()
-        self.frames, self.times = [], []
-
-    def datagram_received(self, data, addr):
-        now = asyncio.get_running_loop().time()
-        for frame in self.framer.feed(data):
-            self.frames.append(frame[0])
-            self.times.append(now)
-
-
-async def sink():
-    loop = asyncio.get_running_loop()
-    transport, protocol = await loop.create_datagram_endpoint(Sink, local_addr=("127.0.0.1", 0))
-    return transport, protocol, f"127.0.0.1:{transport.get_extra_info('sockname')[1]}"
-
-
-async def until(condition, timeout=5.0):
-    for _ in range(int(timeout / 0.01)):
-        if condition():
-            return
-        await asyncio.sleep(0.01)
-    raise AssertionError("timed out")
 
 
 @dataclass(eq=False)
