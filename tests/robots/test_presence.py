@@ -85,3 +85,20 @@ def test_a_run_no_agent_took_is_failed_after_the_start_timeout(lab, settings):
     waiting.refresh_from_db()
     assert waiting.state == "failed" and "did not take it" in waiting.reason
     assert seen == {}
+
+
+def test_the_agents_health_check_says_whether_its_robots_are_online(lab, capsys):
+    import socket
+
+    from robotide.cli import build_parser, cmd_online
+
+    def online(*argv):
+        return cmd_online(build_parser().parse_args(["robots", "online", *argv]), [])
+
+    assert online("alive") == 0
+    assert online("alive", "silent") == 1 and "silent: offline" in capsys.readouterr().out
+    assert online("--here") == 1  # no agent on this host has beaten yet
+    Robot.objects.filter(name="alive").update(agent_host=socket.gethostname())
+    assert online("--here") == 0
+    Robot.objects.filter(name="silent").update(agent_host=socket.gethostname())
+    assert online("--here") == 1
