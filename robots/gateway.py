@@ -37,7 +37,7 @@ class Gateway:
         self.running: dict[int, tuple[dict, Endpoint]] = {}  # row id -> (spec, endpoint)
         self.failed: dict[int, tuple[dict, str]] = {}  # row id -> (spec, why it did not start)
         self.roles: dict[int, str] = {}
-        self.links: set[RouterLink] = set()
+        self.link: RouterLink | None = None  # the driver's: it holds one at a time
         self._ticker: asyncio.Task | None = None
         self._applying = asyncio.Lock()
         self.recorder: TlogRecorder | None = None
@@ -89,16 +89,13 @@ class Gateway:
             if not connected.is_set():
                 why = vehicle.last_error or "not connected yet"
                 raise ConnectionError(f"the vehicle link {vehicle.name} is down: {why}")
-        link = await open_local_link(self.router)
-        self.links = {old for old in self.links if not old.endpoint.closed}
-        self.links.add(link)
-        return link
+        self.link = await open_local_link(self.router)
+        return self.link
 
     def _vehicle_lost(self, why: str) -> None:
         # The driver hears it now rather than after its HEARTBEAT timeout.
-        for link in list(self.links):
-            link.endpoint.abort(f"the vehicle link {self.vehicle.name} was lost: {why}")
-        self.links.clear()
+        if self.link is not None:
+            self.link.endpoint.abort(f"the vehicle link {self.vehicle.name} was lost: {why}")
 
     # -- the rows ----------------------------------------------------------------------------
 
@@ -155,9 +152,8 @@ class Gateway:
         else:
             found["vehicle"] = {"status": "error", "error": self.vehicle_error}
         found["vehicle"]["spec"] = self.vehicle_spec
-        drivers = [link.endpoint.as_dict() for link in self.links]
-        if drivers:
-            found["robot"] = drivers[-1]
+        if self.link is not None and not self.link.endpoint.closed:
+            found["robot"] = self.link.endpoint.as_dict()
         for row_id, (_, endpoint) in self.running.items():
             found[row_id] = _with_clients(endpoint)
         for row_id, (_, why) in self.failed.items():
@@ -209,7 +205,7 @@ class Gateway:
         self.router, self.vehicle, self.vehicle_spec = None, None, None
         self.running.clear()
         self.failed.clear()
-        self.links.clear()
+        self.link = None
 
 
 def recordings_dir(robot_name: str):

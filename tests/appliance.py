@@ -66,6 +66,15 @@ class Appliance:
     # -- life cycle ---------------------------------------------------------------------------
 
     def start(self) -> "Appliance":
+        """Started, or stopped again with its logs printed: a fixture has nothing to clean."""
+        try:
+            return self._start()
+        except Exception:
+            print(self.logs())
+            self.stop()
+            raise
+
+    def _start(self) -> "Appliance":
         if self.mode == "split":
             self._create_database()
             self.env["REDIS_URL"] = f"{REDIS}/{_redis_db()}"

@@ -27,12 +27,7 @@ def appliance(tmp_path_factory):
 def any_appliance(request, tmp_path_factory):
     """The same end-to-end tests, once per deployment mode."""
     app = Appliance(tmp_path_factory.mktemp(request.param), mode=request.param)
-    try:
-        app.start()
-    except Exception:
-        print(app.logs())
-        app.stop()
-        raise
+    app.start()
     yield app
     app.stop()
 

@@ -25,12 +25,7 @@ def appliance(tmp_path_factory):
     """Its own appliance: the gateway's default endpoints on any free loopback port."""
     env = {"ROBOTIDE_GATEWAY_GCS": "127.0.0.1:0", "ROBOTIDE_GATEWAY_PROGRAMS": "127.0.0.1:0"}
     app = Appliance(tmp_path_factory.mktemp("gateway-appliance"), extra_env=env)
-    try:
-        app.start()
-    except Exception:
-        print(app.logs())
-        app.stop()
-        raise
+    app.start()
     yield app
     app.stop()
 

@@ -9,6 +9,9 @@ lost; started again, it serves again, the portal untouched.
 
 import asyncio
 import json
+import os
+import re
+import signal
 import time
 
 import httpx
@@ -73,6 +76,24 @@ def fleet(tmp_path_factory):
         runner.stop()
         print(app.logs()[-5000:])
         app.stop()  # drops the database
+
+
+def test_a_web_worker_that_dies_is_replaced(fleet):
+    app, _ = fleet
+    before = workers_seen(app)
+    victim = sorted(before)[0]
+    os.kill(int(victim.rpartition(":")[2]), signal.SIGKILL)
+    wait(lambda: len(seen := workers_seen(app)) == 2 and victim not in seen, timeout=30,
+         what="a new worker in place of the dead one")  # fmt: skip
+
+
+def test_static_files_are_compressed_and_kept_for_good(fleet):
+    app, _ = fleet
+    page = httpx.get(f"{app.url}/accounts/login/").text
+    css = re.search(r'href="(/static/robotide/app\.[0-9a-f]{12}\.css)"', page).group(1)
+    response = httpx.get(app.url + css, headers={"Accept-Encoding": "gzip"})
+    assert response.status_code == 200 and response.headers["content-encoding"] == "gzip"
+    assert "immutable" in response.headers["cache-control"]
 
 
 def workers_seen(app, times=40) -> set[str]:

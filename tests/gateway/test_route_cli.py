@@ -1,5 +1,5 @@
-"""`robotide route` as a user runs it: a subprocess between loopback UDP ports, stopped by
-SIGTERM."""
+"""`robotide route` as a user runs it: a subprocess between loopback UDP ports, recording
+what it routes to a .tlog, stopped by SIGTERM."""
 
 import os
 import signal
@@ -9,6 +9,7 @@ import sys
 import time
 
 from gateway.framing import Framer
+from gateway.tlog import read_tlog
 from tests.gateway.frames import attitude, command, heartbeat
 
 
@@ -25,14 +26,14 @@ def free_port():
     return port
 
 
-def test_route_forwards_between_udp_ports_and_stops_on_sigterm():
+def test_route_forwards_between_udp_ports_records_and_stops_on_sigterm(tmp_path):
     gcs, gcs_port = udp_socket()
     vehicle, _ = udp_socket()
     router_port = free_port()
     robotide = os.path.join(os.path.dirname(sys.executable), "robotide")
     process = subprocess.Popen(
-        [robotide, "route", f"udp:127.0.0.1:{router_port}", "--to", f"udp:127.0.0.1:{gcs_port}"],
-        cwd="/", stderr=subprocess.PIPE, text=True,
+        [robotide, "route", f"udp:127.0.0.1:{router_port}", "--to", f"udp:127.0.0.1:{gcs_port}",
+         "--tlog", str(tmp_path / "route.tlog")], cwd="/", stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
         got, framer = [], Framer()
@@ -64,6 +65,10 @@ def test_route_forwards_between_udp_ports_and_stops_on_sigterm():
             process.wait()
         gcs.close()
         vehicle.close()
+    # Every frame it routed, both ways, is in the recording, closed cleanly on SIGTERM.
+    recorded = [frame for _, frame in read_tlog(tmp_path / "route.tlog")]
+    assert [f for f in recorded if f != heartbeat(1, 1)] == frames + [command(255, 190, 1, 1)]
+    assert heartbeat(1, 1) in recorded
 
 
 def test_route_says_which_address_is_bad():

@@ -189,12 +189,7 @@ def test_a_created_program_keeps_its_origin_on_one_line(api, alice):
 def remote(tmp_path_factory):
     """Another robotide on 127.0.0.1 that takes requests of at most 16 KB."""
     app = Appliance(tmp_path_factory.mktemp("remote"), extra_env={"ROBOTIDE_MAX_REQUEST_KB": "16"})
-    try:
-        app.start()
-    except Exception:
-        print(app.logs())
-        app.stop()
-        raise
+    app.start()
     app.carol = app.new_user("carol")
     yield app
     app.stop()
