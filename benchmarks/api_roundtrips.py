@@ -127,8 +127,8 @@ def serve(mode: str, sample: str) -> None:
 
 
 def baseline(mode: str, sample: str, file: Path, work: Path) -> dict | None:
-    from programs import launcher
     from programs.languages import get_language
+    from runbox import launcher
 
     server = subprocess.Popen(
         [sys.executable, "-m", "benchmarks.api_roundtrips", "serve", mode, sample],

@@ -38,9 +38,9 @@ from benchmarks.common import (
     session_cookie,
     ws_connect,
 )
-from programs import launcher
-from programs.isolation import Policy, prepare_workdir
-from programs.languages import get_language
+from programs.languages import CLIENTS_DIR, get_language
+from runbox import launcher
+from runbox.isolation import Policy, prepare_workdir
 
 BENCH = "1 start overhead"
 RUNS = 20
@@ -208,7 +208,7 @@ def measure(work: Path) -> list[Figure]:
     bare_cmds: dict[str, tuple[list[str], dict]] = {}
     # The launcher's chain as the agent builds it by default: the run's own account, and the
     # bubblewrap sandbox where it is installed.
-    in_force = Policy().resolve()
+    in_force = Policy().resolve(CLIENTS_DIR)
     uid = in_force.uid(0, str(work))
     sockets = work / "sockets"
     sockets.mkdir()

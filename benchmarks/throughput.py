@@ -44,8 +44,8 @@ from benchmarks.common import (
     session_cookie,
     ws_connect,
 )
-from programs import launcher
 from programs.languages import get_language
+from runbox import launcher
 
 BENCH = "2 throughput"
 N = 2_000_000

@@ -3,9 +3,10 @@ from django.contrib import admin, messages
 from django.contrib.auth.models import Group
 from django.db.models import Count
 
-from programs.models import AgentUnreachable, Program, Revision, Run, Share, request_stop
+from programs.models import Program, Revision, Run, Share
 from programs.shares import add_share
 from robotide.admin import action_with_form
+from robots.runs import AgentUnreachable, request_stop
 
 
 class RevisionInline(admin.TabularInline):

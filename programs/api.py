@@ -19,11 +19,12 @@ from programs.access import (
     programs_for_user,
 )
 from programs.languages import LANGUAGES, get_language
-from programs.models import MAX_SOURCE_BYTES, Program, Run, request_stop, start_run
+from programs.models import MAX_SOURCE_BYTES, Program, Run
 from programs.runlog import plain_text
 from robotide.schemas import Body
 from robots import run_queue
 from robots.models import get_robot_for_user
+from robots.runs import request_stop, start_run
 
 programs_router = Router(tags=["programs"])
 runs_router = Router(tags=["runs"])

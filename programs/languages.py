@@ -9,9 +9,9 @@ import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from runbox import SYSTEM_PATH
+
 CLIENTS_DIR = Path(__file__).resolve().parent / "clients"
-# Programs never see the server's virtualenv: look for interpreters on the system path only.
-SYSTEM_PATH = "/usr/local/bin:/usr/bin:/bin"
 
 
 @dataclass(frozen=True)

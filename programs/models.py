@@ -6,7 +6,6 @@ from django.utils import timezone
 from django.utils.text import slugify
 
 from programs.languages import get_language, language_choices
-from robots.models import Robot
 
 MAX_SOURCE_BYTES = 512 * 1024
 
@@ -97,7 +96,7 @@ class Run(models.Model):
     source = models.TextField(blank=True)
     args = models.JSONField(default=list, blank=True)
     # A robot with a history of runs is not deleted with it: runs belong to their users.
-    robot = models.ForeignKey(Robot, on_delete=models.PROTECT, related_name="runs")
+    robot = models.ForeignKey("robots.Robot", on_delete=models.PROTECT, related_name="runs")
     owner = models.ForeignKey(
         settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="runs"
     )
@@ -171,7 +170,7 @@ class Run(models.Model):
         return f"{slugify(self.program_name) or 'program'}-run{self.pk}.log"
 
     @classmethod
-    def create_for(cls, program: Program, robot: Robot, user, args=()) -> "Run":
+    def create_for(cls, program: Program, robot, user, args=()) -> "Run":
         return cls.objects.create(
             program=program,
             program_name=program.name,
@@ -305,74 +304,6 @@ def ordinal(n: int) -> str:
     """1st, 2nd, 3rd, 4th, 11th, 21st..."""
     suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
     return f"{n}{suffix}"
-
-
-def start_run(program: Program, robot: Robot, user, args=()) -> Run:
-    """Create the run and hand it to the robot's agent (which owns the process)."""
-    language = program.lang
-    if not language.available:
-        raise RunRefused(
-            f"{language.label} is not available on this robot computer ({language.install_hint})."
-        )
-    run = Run.create_for(program, robot, user, args)
-    message = {
-        "run_id": run.pk,
-        "language": run.language,
-        "source": run.source,
-        "filename": program.filename,
-        "args": [str(a) for a in args],
-        "user": user.get_username(),
-    }
-    transaction.on_commit(lambda: _hand_to_agent(run, message))
-    return run
-
-
-def _hand_to_agent(run: Run, message: dict) -> None:
-    from channels.exceptions import ChannelFull
-
-    from robots.bus import tell_agent_sync
-
-    try:
-        tell_agent_sync(run.robot.name, "run.start", **message)
-    except ChannelFull:
-        # Nobody has taken the robot's commands for a long while: say so instead of waiting.
-        fail_to_start(run, f"the agent of robot {run.robot.name!r} is not taking commands")
-    except Exception as exc:  # the channel layer itself is away (Redis down)
-        fail_to_start(run, f"the robot's agent cannot be reached ({type(exc).__name__})")
-
-
-def fail_to_start(run: Run, why: str) -> None:
-    Run.mark_ended(run.pk, Run.State.FAILED, None, f"could not start: {why}")
-    run.refresh_from_db()
-
-
-def request_stop(run: Run) -> None:
-    """Stop a run: a queued one is cancelled here (its agent need not be reachable), an
-    active one is stopped by its agent."""
-    from robots.bus import tell_agent_sync
-
-    if run.queued:
-        from robots import run_queue
-
-        if run_queue.cancel(run):
-            return
-        run.refresh_from_db()  # it started meanwhile: stop it as any other
-    if run.active:
-        try:
-            tell_agent_sync(run.robot.name, "run.stop", run_id=run.pk)
-        except Exception as exc:  # ChannelFull, or the channel layer away
-            raise AgentUnreachable(
-                f"the agent of robot {run.robot.name!r} cannot be reached to stop it"
-                f" ({type(exc).__name__}); the emergency stop or its agent's restart will"
-            ) from exc
-
-
-class RunRefused(Exception):
-    pass
-
-
-class AgentUnreachable(Exception):
-    pass
 
 
 class Share(models.Model):

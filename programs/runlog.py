@@ -1,4 +1,4 @@
-"""Reading a run's log file: tagged lines written by programs.supervisor."""
+"""Reading a run's log file: tagged lines written by runbox.supervisor."""
 
 import os
 from collections.abc import Iterator

@@ -27,19 +27,12 @@ from programs.languages import (
     editor_modes,
     get_language,
 )
-from programs.models import (
-    AgentUnreachable,
-    Program,
-    Run,
-    RunRefused,
-    Share,
-    request_stop,
-    start_run,
-)
+from programs.models import Program, Run, Share
 from programs.runlog import plain_text, render_lines, tail
 from programs.shares import ShareError, add_share
 from robots import run_queue
 from robots.models import get_robot_for_user, robots_for_user
+from robots.runs import AgentUnreachable, RunRefused, request_stop, start_run
 
 
 @login_required

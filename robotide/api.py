@@ -11,7 +11,6 @@ from ninja.errors import AuthenticationError, HttpError
 from ninja.security import HttpBearer, django_auth
 
 from programs.api import programs_router, runs_router
-from programs.models import AgentUnreachable, RunRefused
 from programs.shares_api import groups_router, shares_router
 from robotide.models import ApiToken
 from robotide.tokens_api import tokens_router
@@ -19,6 +18,7 @@ from robots.api import robots_router
 from robots.bridges_api import bridges_router
 from robots.bus import AgentUnavailable
 from robots.gateway_api import gateway_router
+from robots.runs import AgentUnreachable, RunRefused
 
 
 class BearerToken(HttpBearer):

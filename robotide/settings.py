@@ -267,7 +267,7 @@ else:
     WHITENOISE_USE_FINDERS = True
 WHITENOISE_AUTOREFRESH = DEBUG
 
-# Limits a run gets unless its robot's settings say otherwise (see programs.launcher).
+# Limits a run gets unless its robot's settings say otherwise (see runbox.launcher).
 RUN_DEFAULTS = {
     "cpu_seconds": env_int("ROBOTIDE_RUN_CPU_SECONDS", 600),
     "wall_seconds": env_int("ROBOTIDE_RUN_WALL_SECONDS", 0),
@@ -283,7 +283,7 @@ RUN_DEFAULTS = {
 # robot is stopped after this many seconds; a robot's settings.queue_turn_seconds overrides it
 # (0: no limit).
 QUEUE_TURN_SECONDS = env_float("ROBOTIDE_QUEUE_TURN_SECONDS", 300.0)
-# -- Program isolation (programs.isolation): a robot's settings may override each.
+# -- Program isolation (runbox.isolation): a robot's settings may override each.
 RUN_ISOLATION = {
     "isolation": os.environ.get("ROBOTIDE_RUN_ISOLATION", "auto"),
     "network": os.environ.get("ROBOTIDE_RUN_NETWORK", "loopback"),

@@ -28,20 +28,8 @@ from django.conf import settings
 from django.utils import timezone
 
 import rhal
-from programs import launcher
-from programs.isolation import (
-    NETWORKS,
-    InForce,
-    IsolationUnavailable,
-    Policy,
-    prepare_workdir,
-    run_uid,
-    unreachable_ancestor,
-)
 from programs.languages import CLIENTS_DIR, LanguageUnavailable, get_language
 from programs.models import Run
-from programs.supervisor import RunProcess
-from programs.watch import RunWatch, signal_account
 from robots import rpc
 from robots.bridges import Bridges
 from robots.bus import MANAGER_CHANNEL, RUNS_GROUP, run_group
@@ -51,6 +39,18 @@ from robots.lease import ControlLease, Holder, LeaseHeld
 from robots.models import Robot, agent_channel, robot_group
 from robots.robot_api import RobotApi
 from robots.run_queue import RunQueue
+from runbox import launcher
+from runbox.isolation import (
+    NETWORKS,
+    InForce,
+    IsolationUnavailable,
+    Policy,
+    prepare_workdir,
+    run_uid,
+    unreachable_ancestor,
+)
+from runbox.supervisor import RunProcess
+from runbox.watch import RunWatch, signal_account
 
 log = logging.getLogger(__name__)
 
@@ -586,7 +586,7 @@ def resolve_isolation(robot: Robot) -> tuple[InForce | None, str]:
     """What the robot's runs get here, or why they cannot run (said to whoever starts one)."""
     try:
         policy = Policy.from_settings(robot.run_isolation(settings.RUN_ISOLATION))
-        in_force = policy.resolve()
+        in_force = policy.resolve(CLIENTS_DIR)
         for needed in (settings.RUNS_DIR, CLIENTS_DIR):
             if not in_force.sandbox and (blocked := unreachable_ancestor(needed)):
                 raise IsolationUnavailable(

@@ -15,12 +15,12 @@ from django import forms
 from django.conf import settings as django_settings
 
 import rhal
-from programs.isolation import IsolationUnavailable, Policy
-from programs.launcher import Limits
 from rhal.camera import CameraSettings
 from rhal.options import Option, driver_options, url_options
 from robots.host_services import check_speech_settings
 from robots.models import RUN_SETTINGS, Robot
+from runbox.isolation import IsolationUnavailable, Policy
+from runbox.launcher import Limits
 
 
 def known_driver(url: str) -> str:

@@ -44,9 +44,9 @@ from channels.db import database_sync_to_async
 from django.conf import settings
 
 import rhal
-from programs.isolation import InForce
 from robots.models import Robot
 from robots.rpc import ROBOT_ERROR, RpcError, bind_params
+from runbox.isolation import InForce
 
 MAX_SAY_CHARS = 500
 MAX_SAY_WAITING = 8  # utterances queued behind the one being spoken

@@ -44,6 +44,7 @@ from django.conf import settings
 from django.core.exceptions import PermissionDenied
 from django.http import Http404
 
+from programs.access import get_run_for_user, runs_for_user
 from programs.models import Run, ordinal
 from robots.bus import RUNS_GROUP, blocking, run_group, tell_agent_sync
 from robots.lease import Holder, LeaseHeld
@@ -328,8 +329,6 @@ def runs_to_see(user):
     (staff, the robot's owner): whose and which program waits, to decide the order."""
     from django.db.models import Q
 
-    from programs.access import runs_for_user
-
     runs = runs_for_user(user)
     if not user.is_authenticated or user.is_superuser:
         return runs
@@ -342,8 +341,6 @@ def runs_to_see(user):
 
 def get_run_to_manage(user, run_id) -> Run:
     """A run ``user`` may see (programs.access), or a queued one of a robot they manage."""
-    from programs.access import get_run_for_user
-
     try:
         return get_run_for_user(user, run_id)
     except Http404:
@@ -356,8 +353,6 @@ def get_run_to_manage(user, run_id) -> Run:
 def queue_rows(user, robot: Robot) -> list[dict]:
     """The robot's queue as ``user`` may see it: every place in line; which program and whose
     for their own runs, their students' (programs.access) and to those who manage the queue."""
-    from programs.access import runs_for_user
-
     manager = may_manage(user, robot)
     queued = runs_for_user(user).filter(robot=robot, state=Run.State.QUEUED)
     visible = set(queued.values_list("pk", flat=True))

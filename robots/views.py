@@ -10,7 +10,7 @@ from django.utils.http import url_has_allowed_host_and_scheme
 from django.views.decorators.http import require_POST
 
 from programs.access import get_program_for_user, programs_for_user, runs_for_user
-from programs.models import Run, RunRefused, ordinal, start_run
+from programs.models import Run, ordinal
 from robots import gateway_views, run_queue
 from robots.bus import AgentUnavailable, ask_agent_sync, reconfigure_sync
 from robots.camera import has_camera
@@ -18,6 +18,7 @@ from robots.driver_settings import current_values
 from robots.forms import ButtonForm, RobotConfigForm
 from robots.models import RobotButton, get_robot_for_user, robots_for_user
 from robots.readings import sensor_rows, show_items, status
+from robots.runs import RunRefused, start_run
 
 SNAPSHOT_TIMEOUT = 1.0
 CAMERA_ASKS = threading.BoundedSemaphore(2)

@@ -139,7 +139,7 @@ def test_stop_selected_runs_without_an_agent_does_not_crash(client, lab):
 
 
 def test_stop_selected_runs_reports_an_unreachable_agent(client, lab, monkeypatch):
-    from programs.models import AgentUnreachable
+    from robots.runs import AgentUnreachable
 
     def unreachable(run):
         raise AgentUnreachable("the agent of robot 'rover' cannot be reached")

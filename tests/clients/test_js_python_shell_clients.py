@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 from PIL import Image
 
-from programs import launcher
 from programs.languages import CLIENTS_DIR, LANGUAGES
 from robots.host_services import HostServices
+from runbox import launcher
 
 sys.path.insert(0, str(CLIENTS_DIR / "python"))
 import robot as robot_client  # noqa: E402  (the client programs get on their path)

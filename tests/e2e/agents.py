@@ -6,7 +6,8 @@ import time
 
 from channels.db import database_sync_to_async
 
-from programs.models import Program, Run, start_run
+from programs.models import Program, Run
+from robots.runs import start_run
 
 
 async def until(predicate, timeout=10.0, what="condition"):

@@ -18,12 +18,13 @@ from django.contrib.auth.models import User
 from django.test import Client
 
 from programs.consumers import RunConsumer
-from programs.models import Run, request_stop
+from programs.models import Run
 from robotide.models import ApiToken
 from robots.bus import ask_agent, send_to_agent
 from robots.consumers import RobotConsumer
 from robots.lease import Holder
 from robots.models import Robot
+from robots.runs import request_stop
 from tests.e2e.agents import run_program, until
 
 pytestmark = pytest.mark.django_db(transaction=True)

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from programs import launcher
 from programs.languages import LANGUAGES
 from programs.runlog import tail
-from programs.supervisor import RunProcess
+from runbox import launcher
+from runbox.supervisor import RunProcess
 
 PYTHON = LANGUAGES["python"]
 SHELL = LANGUAGES["shell"]
@@ -223,7 +223,8 @@ async def test_process_limit_is_applied(tmp_path):
 async def test_a_program_is_killed_when_its_agent_dies(tmp_path):
     """setpriv --pdeathsig: no program outlives the process that launched it."""
     program = tmp_path / "forever.py"
-    program.write_text("import time\nwhile True: time.sleep(1)\n")
+    # It says when it runs: killed before setpriv set its death signal, it would be orphaned.
+    program.write_text("import time\nprint('ready', flush=True)\nwhile True: time.sleep(1)\n")
     argv = launcher.command(PYTHON, program, launcher.Limits())
     code = (
         "import subprocess, sys, time\n"
@@ -234,6 +235,7 @@ async def test_a_program_is_killed_when_its_agent_dies(tmp_path):
         sys.executable, "-c", code, stdout=asyncio.subprocess.PIPE
     )
     child = int(await parent.stdout.readline())
+    assert await parent.stdout.readline() == b"ready\n"  # the program shares its stdout
     assert pid_alive(child)
     parent.kill()
     await parent.wait()

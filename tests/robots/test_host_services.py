@@ -19,11 +19,11 @@ from django.conf import settings
 from PIL import Image, ImageDraw
 
 import rhal
-from programs import launcher
 from programs.languages import CLIENTS_DIR, LANGUAGES
 from robots import host_services
 from robots.host_services import HostServices
 from robots.models import Robot
+from runbox import launcher
 from tests.robot_api_server import admit
 
 sys.path.insert(0, str(CLIENTS_DIR / "python"))

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from programs.watch import processes_of
+from runbox.watch import processes_of
 from tests.appliance import Appliance, wait_for
 
 LIMITS = {"wall_seconds": 4, "log_size_mb": 1, "processes": 32, "memory_mb": 200,

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
-from programs.languages import CLIENTS_DIR, SYSTEM_PATH
+from runbox import SYSTEM_PATH
 
 ISOLATIONS = ("auto", "sandbox", "account")
 NETWORKS = ("none", "loopback", "full")
@@ -63,7 +63,7 @@ class Policy:
             )
         return policy
 
-    def resolve(self) -> "InForce":
+    def resolve(self, clients_dir: Path) -> "InForce":
         """What this machine gives for the policy, or IsolationUnavailable saying why not."""
         if not can_switch_user():
             raise IsolationUnavailable(
@@ -82,7 +82,7 @@ class Policy:
                 f"network {self.network!r} needs nftables and CAP_NET_ADMIN"
                 " (apt-get install nftables; run robotide as root); or choose another network"
             )
-        return InForce(sandbox=sandbox, network=self.network, tmp_mb=self.tmp_mb)
+        return InForce(sandbox, self.network, self.tmp_mb, clients_dir)
 
 
 @dataclass(frozen=True)
@@ -90,6 +90,7 @@ class InForce:
     sandbox: bool
     network: str
     tmp_mb: int
+    clients_dir: Path  # the Robot API clients, mounted read-only for the run
 
     def describe(self) -> str:
         where = "sandbox (bubblewrap)" if self.sandbox else "own account, shared filesystem"
@@ -108,7 +109,7 @@ class InForce:
         return self.API_DIR if self.sandbox else socket_dir
 
     def clients(self) -> Path:
-        return self.CLIENTS if self.sandbox else CLIENTS_DIR
+        return self.CLIENTS if self.sandbox else self.clients_dir
 
     def uid(self, run_id: int, instance: str) -> int:
         return run_uid(self.network, run_id, instance)
@@ -137,7 +138,7 @@ class InForce:
             # Mount points' parents: bubblewrap would make them 0700, closed to the run.
             *(arg for d in ("/home", "/run", "/opt", "/opt/robotide")
               for arg in ("--perms", "0755", "--dir", d)),
-            "--ro-bind", str(CLIENTS_DIR), str(self.CLIENTS),
+            "--ro-bind", str(self.clients_dir), str(self.CLIENTS),
             "--bind", str(socket_dir), str(self.API_DIR),
             "--bind", str(workdir), str(self.HOME), "--chdir", str(self.HOME),
         ]  # fmt: skip

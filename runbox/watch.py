@@ -1,6 +1,6 @@
 """Watching a run's processes through its own OS account (no Django here).
 
-The kernel enforces most limits (programs.launcher); this watches what it does not — wall-clock
+The kernel enforces most limits (runbox.launcher); this watches what it does not — wall-clock
 time and disk written — and remembers how close a run came to the others, so that its log can
 say which limit a program ran into when it failed on one.
 """

@@ -2,7 +2,7 @@
 
 A run is started as ``[bwrap ...] setpriv <run's account> -- prlimit <limits> -- <interpreter>
 <file>``: each tool sets its part and execs the next, so the limits and the account are in
-place before any of the program's code runs (see programs.isolation for the account and the
+place before any of the program's code runs (see runbox.isolation for the account and the
 sandbox). The supervisor adds a new session, the run's working directory and the clean
 environment built here, and enforces what the kernel does not: wall-clock time, disk written
 and output size.
@@ -12,8 +12,8 @@ import shutil
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-from programs.isolation import InForce
-from programs.languages import CLIENTS_DIR, SYSTEM_PATH, Language
+from runbox import SYSTEM_PATH
+from runbox.isolation import InForce
 
 MB = 1024 * 1024
 
@@ -58,7 +58,7 @@ def _tool(name: str) -> str:
 
 
 def command(
-    language: Language,
+    language,
     program_file: Path,
     limits: Limits,
     args=(),
@@ -79,7 +79,7 @@ def command(
 
 
 def environment(
-    language: Language, home: Path, extra: dict[str, str], clients_dir: Path = CLIENTS_DIR
+    language, home: Path, extra: dict[str, str], clients_dir: Path | None = None
 ) -> dict[str, str]:
     """A clean environment: nothing of the server's, only what a program needs."""
     env = {
@@ -92,6 +92,7 @@ def environment(
         **language.env,
         **extra,
     }
-    for var, folder in language.client_env(clients_dir).items():
+    clients = language.client_env(clients_dir) if clients_dir else language.client_env()
+    for var, folder in clients.items():
         env[var] = f"{folder}:{env[var]}" if env.get(var) else folder
     return env

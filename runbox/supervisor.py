@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from subprocess import DEVNULL, PIPE
 
-from programs.watch import RunWatch, signal_account
+from runbox.watch import RunWatch, signal_account
 
 STDOUT, STDERR, SYSTEM = b"o", b"e", b"s"
 TAG_OF_FD = {1: STDOUT, 2: STDERR}
