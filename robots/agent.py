@@ -12,6 +12,7 @@ import asyncio
 import contextlib
 import itertools
 import logging
+import os
 import secrets
 import shutil
 import socket
@@ -40,20 +41,16 @@ from robots.models import Robot, agent_channel, robot_group
 from robots.robot_api import RobotApi
 from robots.run_queue import RunQueue
 from runbox import launcher
-from runbox.isolation import (
-    NETWORKS,
-    InForce,
-    IsolationUnavailable,
-    Policy,
-    prepare_workdir,
-    run_uid,
-    unreachable_ancestor,
-)
+from runbox.box import Box, Listener
+from runbox.isolation import InForce, IsolationUnavailable, Policy, run_uid
+from runbox.relays import relay_to_host
 from runbox.supervisor import RunProcess
 from runbox.watch import RunWatch, signal_account
 
 log = logging.getLogger(__name__)
 
+# Inside a run's own network namespace the Robot API's TCP side is always here.
+ROBOT_API_PORT = 7010
 TELEMETRY_INTERVAL = 0.25
 SHOWS_SNAPSHOT_EVERY = 4  # telemetry ticks
 RETRY_DELAY = 1.0
@@ -359,42 +356,44 @@ class RobotAgent:
             raise IsolationUnavailable(self.isolation_error)
         language = get_language(message["language"])
         directory = settings.RUNS_DIR / str(run_id)
-        workdir = directory / "work"
-        workdir.mkdir(parents=True, exist_ok=True)
-        program_file = workdir / message["filename"]
-        program_file.write_text(message["source"])
+        directory.mkdir(parents=True, exist_ok=True)
         uid = self.isolation.uid(run_id, str(settings.DATA_DIR))
-        prepare_workdir(workdir, uid)
         limits = launcher.Limits.from_settings(self.limits)
         token = secrets.token_urlsafe(24)
-        socket_seen_as = self.isolation.api_dir(self.socket_dir) / self.server.unix_path.name
+        program_env = self.gateway.program_env()
+        box = Box(
+            self.isolation,
+            source=message["source"].encode(),
+            filename=message["filename"],
+            disk_mb=limits.disk_mb,
+            listeners=self._listeners(program_env),
+        )
+        extra = {
+            "ROBOT_API": f"unix:{self.isolation.api_dir() / self.server.unix_path.name}",
+            "ROBOT_TOKEN": token,
+            "ROBOT_NAME": self.name,
+            "ROBOT_RUN_ID": str(run_id),
+        }
+        if self.isolation.network != "none":
+            extra |= {"ROBOT_API_TCP": f"127.0.0.1:{ROBOT_API_PORT}", **program_env}
         env = launcher.environment(
-            language,
-            self.isolation.home(workdir),
-            {
-                "ROBOT_API": f"unix:{socket_seen_as}",
-                "ROBOT_API_TCP": self.api_address,
-                "ROBOT_TOKEN": token,
-                "ROBOT_NAME": self.name,
-                "ROBOT_RUN_ID": str(run_id),
-                **self.gateway.program_env(),
-            },
-            clients_dir=self.isolation.clients(),
+            language, self.isolation.home(), extra, clients_dir=self.isolation.clients()
         )
         argv = launcher.command(
-            language, program_file, limits, message.get("args", ()),
-            isolation=self.isolation, uid=uid, socket_dir=self.socket_dir,
+            language, self.isolation.home() / message["filename"], limits,
+            message.get("args", ()), isolation=self.isolation, uid=uid,
+            socket_dir=self.socket_dir, box_args=box.args(),
         )  # fmt: skip
         process = RunProcess(
             argv,
             env=env,
-            cwd=workdir,
+            cwd=directory,
             log_path=directory / "output.log",
             on_output=partial(self._publish_output, run_id),
             max_log_bytes=limits.log_size_mb * 1024 * 1024,
             grace=float(self.limits["stop_grace_seconds"]),
-            watch=RunWatch(limits, uid, workdir),
-            wrapped=self.isolation.sandbox,
+            watch=RunWatch(limits, box),
+            box=box,
         )
         # The token is good before the program starts: it may call auth at once.
         active = ActiveRun(run_id, token, process, user=message.get("user", ""))
@@ -405,9 +404,22 @@ class RobotAgent:
         except BaseException:
             self.runs.pop(run_id, None)
             self.tokens.pop(token, None)
+            await box.close()
             raise
         active.watcher = asyncio.create_task(self._watch(active))
         return active
+
+    def _listeners(self, program_env: dict) -> list[Listener]:
+        """What the run's robot gives programs on 127.0.0.1 inside the run's namespace."""
+        if self.isolation.network == "none":
+            return []
+        listeners = [Listener(f"tcp:{ROBOT_API_PORT}", self.server.serve_socket)]
+        services = list(self.isolation.policy.loopback_ports)
+        if "ROBOT_MAVLINK" in program_env:  # udpout:127.0.0.1:PORT, the programs' endpoint
+            services.append(f"udp:{program_env['ROBOT_MAVLINK'].rsplit(':', 1)[1]}")
+        for service in dict.fromkeys(services):
+            listeners.append(Listener(service, partial(relay_to_host, service)))
+        return listeners
 
     async def _watch(self, active: ActiveRun) -> None:
         outcome = await active.process.wait()
@@ -418,7 +430,7 @@ class RobotAgent:
         await self.stop_motion_of(active.run_id)
         if self.lease.release(active.run_id):
             self._lease_changed()
-        shutil.rmtree(settings.RUNS_DIR / str(active.run_id) / "work", ignore_errors=True)
+        await active.process.box.close()
         await self._end_run(active.run_id, outcome.state, outcome.exit_code, outcome.reason)
 
     async def _end_run(self, run_id, state, exit_code, reason) -> None:
@@ -578,8 +590,8 @@ def flat_units(specs: dict) -> dict[str, str]:
 
 def end_leftovers(run_id: int) -> None:
     """Whatever a lost run left running ends now: its account's processes are all its own."""
-    for network in NETWORKS:
-        signal_account(run_uid(network, run_id, str(settings.DATA_DIR)), SIGKILL)
+    if os.geteuid() == 0:
+        signal_account(run_uid(run_id, str(settings.DATA_DIR)), SIGKILL)
 
 
 def resolve_isolation(robot: Robot) -> tuple[InForce | None, str]:
@@ -587,12 +599,6 @@ def resolve_isolation(robot: Robot) -> tuple[InForce | None, str]:
     try:
         policy = Policy.from_settings(robot.run_isolation(settings.RUN_ISOLATION))
         in_force = policy.resolve(CLIENTS_DIR)
-        for needed in (settings.RUNS_DIR, CLIENTS_DIR):
-            if not in_force.sandbox and (blocked := unreachable_ancestor(needed)):
-                raise IsolationUnavailable(
-                    f"without a sandbox, run accounts reach {needed} through {blocked},"
-                    " which only its owner may enter: move it or install bubblewrap"
-                )
     except IsolationUnavailable as exc:
         log.error("robot %s: its programs cannot run: %s", robot.name, exc)
         return None, str(exc)

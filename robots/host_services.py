@@ -122,7 +122,7 @@ class HostServices:
         if phrases:  # refused before anything is recorded
             await asyncio.to_thread(RECOGNISER.check, phrases)
         if wav is not None:
-            data = await asyncio.to_thread(read_program_file, wav, workdir_of(active.run_id))
+            data = await asyncio.to_thread(read_program_file, wav, workdir_of(active))
             pcm = await audio_to_pcm(data)
         else:
             speech = await self.speech_settings()
@@ -368,15 +368,19 @@ def _phrases(words) -> tuple[str, ...]:
     return tuple(phrases)
 
 
-def workdir_of(run_id: int) -> Path:
-    return settings.RUNS_DIR / str(run_id) / "work"
+def workdir_of(active) -> Path:
+    """The run's folder as the agent reaches it: inside its box, or (tests) a plain folder."""
+    box = getattr(active.process, "box", None)
+    if box is not None and box.folder is not None:
+        return box.folder
+    return settings.RUNS_DIR / str(active.run_id) / "work"
 
 
 def read_program_file(path, workdir: Path) -> bytes:
     """The bytes of a file in the run's folder, named as the program sees it: relative to its
-    folder, or absolute under /home/robot (its folder in the sandbox) or under the folder's
-    real path (a run without the sandbox). Nothing outside the folder is read, not even
-    through a symbolic link."""
+    folder, or absolute under /home/robot (its folder in the box) or under `workdir`. Nothing
+    outside the folder is read, not even through a symbolic link: the name is walked one
+    folder at a time from the folder's own descriptor, never following a link."""
     if not isinstance(path, str) or not path or "\0" in path:
         raise ValueError("wav must be the name of a file in the program's folder")
     named = PurePosixPath(path)
@@ -387,22 +391,18 @@ def read_program_file(path, workdir: Path) -> bytes:
                 break
         else:
             raise ValueError(f"wav must be a file in the program's folder ({InForce.HOME}): {path}")
-    root = workdir.resolve()
-    outside = ValueError(f"wav must be a file in the program's folder: {path}")
+    parts = named.parts
+    if not parts or any(part in ("..", ".") for part in parts):
+        raise ValueError(f"wav must be a file in the program's folder: {path}")
     try:
-        target = (root / named).resolve(strict=True)
-    except (OSError, RuntimeError):
-        raise ValueError(f"no file {path} in the program's folder") from None
-    if not target.is_relative_to(root):
-        raise outside
-    try:
-        fd = os.open(target, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+        folder = os.open(workdir, os.O_RDONLY | os.O_DIRECTORY)
     except OSError as exc:
         raise ValueError(f"cannot read {path}: {exc.strerror}") from None
     try:
-        # What was opened, whatever was swapped in meanwhile: still inside, a plain file.
-        if not Path(os.readlink(f"/proc/self/fd/{fd}")).is_relative_to(root):
-            raise outside
+        fd = _open_beneath(folder, parts)
+    except OSError as exc:
+        raise ValueError(f"no file {path} in the program's folder ({exc.strerror})") from None
+    try:
         status = os.fstat(fd)
         if not stat.S_ISREG(status.st_mode):
             raise ValueError(f"{path} is not a file")
@@ -412,6 +412,18 @@ def read_program_file(path, workdir: Path) -> bytes:
             return file.read(MAX_AUDIO_BYTES + 1)
     finally:
         os.close(fd)
+
+
+def _open_beneath(folder: int, parts: tuple[str, ...]) -> int:
+    """Open folder/parts[0]/.../parts[-1] without following links; closes `folder`."""
+    try:
+        for part in parts[:-1]:
+            inner = os.open(part, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW, dir_fd=folder)
+            os.close(folder)
+            folder = inner
+        return os.open(parts[-1], os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK, dir_fd=folder)
+    finally:
+        os.close(folder)
 
 
 async def audio_to_pcm(data: bytes) -> bytes:

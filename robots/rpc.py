@@ -106,6 +106,11 @@ class RobotApiServer:
             self._servers.append(await loop.create_unix_server(factory, str(self.unix_path)))
         return self.address
 
+    async def serve_socket(self, sock: socket.socket) -> "asyncio.Server":
+        """Serve on a socket made elsewhere too (one in a run's network namespace)."""
+        loop = asyncio.get_running_loop()
+        return await loop.create_server(lambda: _Connection(self), sock=sock)
+
     async def close(self) -> None:
         servers, self._servers = self._servers, []
         for server in servers:

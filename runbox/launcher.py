@@ -1,11 +1,10 @@
 """The launcher: the paper's "wrapper script", as a command line built for each run.
 
-A run is started as ``[bwrap ...] setpriv <run's account> -- prlimit <limits> -- <interpreter>
-<file>``: each tool sets its part and execs the next, so the limits and the account are in
-place before any of the program's code runs (see runbox.isolation for the account and the
-sandbox). The supervisor adds a new session, the run's working directory and the clean
-environment built here, and enforces what the kernel does not: wall-clock time, disk written
-and output size.
+A run is started as ``bwrap <box> -- setpriv <run's account> -- prlimit <limits> --
+<interpreter> <file>``: each tool sets its part and execs the next, so the box, the account
+and the limits are in place before any of the program's code runs (see runbox.isolation and
+runbox.box). The supervisor adds a new session and the clean environment built here, and
+enforces what the kernel does not: wall-clock time and output size.
 """
 
 import shutil
@@ -65,17 +64,17 @@ def command(
     isolation: InForce | None = None,
     uid: int | None = None,
     socket_dir: Path | None = None,
+    box_args: list[str] = (),
 ) -> list[str]:
-    """The run's command line; without `isolation` (tests of the supervisor) it stays as is."""
-    workdir = program_file.parent
-    seen_as = isolation.home(workdir) / program_file.name if isolation else program_file
+    """The run's command line; without `isolation` (tests of the supervisor) it stays as is.
+    In a box, `program_file` is where the program lies inside it."""
     argv = [
         _tool("prlimit"), *limits.prlimit_args(), "--",
-        *language.command(str(seen_as)), *map(str, args),
+        *language.command(str(program_file)), *map(str, args),
     ]  # fmt: skip
     if isolation is None:
         return [_tool("setpriv"), "--pdeathsig", "KILL", "--", *argv]
-    return isolation.wrap(argv, uid, workdir, socket_dir)
+    return isolation.wrap(argv, uid, socket_dir, list(box_args))
 
 
 def environment(

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from subprocess import DEVNULL, PIPE
 
-from runbox.watch import RunWatch, signal_account
+from runbox.watch import RunWatch
 
 STDOUT, STDERR, SYSTEM = b"o", b"e", b"s"
 TAG_OF_FD = {1: STDOUT, 2: STDERR}
@@ -66,13 +66,15 @@ class RunProcess:
         grace: float = 3.0,
         batch_interval: float = 0.1,
         watch: RunWatch | None = None,
-        wrapped: bool = False,
+        box=None,
     ):
-        """`watch`: the run's own account, watched and signalled as a whole (see watch.py).
-        `wrapped`: a sandbox runs the program and reports its death by signal N as 128 + N.
+        """`box`: the run's box (runbox.box.Box), which bubblewrap makes around the program:
+        set up between bubblewrap's start and the program's, signalled as a whole, and
+        reporting the program's death by signal N as 128 + N. `watch`: what it samples.
         """
         self.argv, self.env, self.cwd, self.log_path = argv, env, cwd, log_path
-        self.watch, self.wrapped = watch, wrapped
+        self.watch, self.box = watch, box
+        self.wrapped = box is not None
         self._watcher: asyncio.Task | None = None
         self.on_output = on_output
         self.max_log_bytes = max_log_bytes
@@ -115,10 +117,18 @@ class RunProcess:
                 start_new_session=True,
                 # The server's own umask is 077; a sandbox's mount points must be traversable.
                 umask=0o022,
+                pass_fds=self.box.pass_fds() if self.box else (),
             )
         except OSError:
             self._log.close()
             raise
+        if self.box is not None:
+            try:
+                await self.box.open()
+            except Exception as exc:  # the program never starts: the run fails, saying why
+                self.system_line(f"its box could not be made: {exc}")
+                self._stop_reason, self._stop_state = f"could not start: {exc}", "failed"
+                self._signal_group(signal.SIGKILL)
         if self.watch is not None:
             self._watcher = loop.create_task(self.watch.run(self._limit_reached))
         return self.pid
@@ -231,13 +241,13 @@ class RunProcess:
     # -- process --------------------------------------------------------------------------
 
     def _signal_group(self, sig: int) -> None:
-        """To the program's processes: by its account if it has one, else by its group.
+        """To the program's processes: through its box if it has one, else by its group.
 
-        The account's processes are the program's alone: a sandbox around them is spared a
-        SIGTERM (it would answer with SIGKILL to all) and a child that left the group is not.
+        A box signals what runs in it, sparing the sandbox's own first process a SIGTERM (it
+        would answer with SIGKILL to all), and reaches a child that left the group.
         """
-        if self.watch is not None:
-            signal_account(self.watch.uid, sig)
+        if self.box is not None:
+            self.box.signal(sig)
             if sig != signal.SIGKILL:
                 return
         try:

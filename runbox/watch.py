@@ -1,8 +1,9 @@
-"""Watching a run's processes through its own OS account (no Django here).
+"""Watching a run's processes through its box (no Django here).
 
-The kernel enforces most limits (runbox.launcher); this watches what it does not — wall-clock
-time and disk written — and remembers how close a run came to the others, so that its log can
-say which limit a program ran into when it failed on one.
+The kernel enforces most limits (the run's cgroup, its folder's size, rlimits); this watches
+what it does not — wall-clock time, CPU seconds across the whole run, a run its cgroup's
+memory limit has struck — and remembers how close a run came to the others, so that its log
+can say which limit a program ran into when it failed on one.
 """
 
 import asyncio
@@ -14,7 +15,6 @@ from pathlib import Path
 
 MB = 1024 * 1024
 INTERVAL = 0.5
-MAX_FILES_COUNTED = 20_000  # a folder with more is "full" whatever their sizes
 # What programs print on stderr when the kernel refuses them something, by the limit behind
 # it: a run that dies within one sample still gets told which limit it met.
 LIMIT_SIGNS = {
@@ -22,11 +22,12 @@ LIMIT_SIGNS = {
     "open_files": (b"Too many open files",),
     "memory": (b"MemoryError", b"Cannot allocate memory", b"out of memory", b"bad_alloc"),
     "file_size": (b"File too large",),
+    "disk": (b"No space left on device", b"ENOSPC"),
 }
 
 
 def processes_of(uid: int) -> list[int]:
-    """Every process running as `uid`: exactly a run's, since each run has its own account."""
+    """Every process running as `uid` (as root, a run's own account)."""
     pids = []
     for entry in os.scandir("/proc"):
         if entry.name.isdigit():
@@ -63,15 +64,17 @@ class Usage:
         self.disk = max(self.disk, other.disk)
 
 
-def measure(uid: int, workdir: Path) -> Usage:
-    usage = Usage(disk=disk_used(workdir))
-    for pid in processes_of(uid):
+def measure(box) -> Usage:
+    usage = Usage(disk=disk_used(box.folder))
+    for pid in box.processes():
         usage.processes += 1
         try:
             usage.open_files = max(usage.open_files, len(os.listdir(f"/proc/{pid}/fd")))
             usage.memory = max(usage.memory, vm_peak(pid))
         except (FileNotFoundError, ProcessLookupError):
             pass
+    if box.cgroup is not None:
+        usage.memory = max(usage.memory, box.cgroup.usage().memory)
     return usage
 
 
@@ -83,25 +86,22 @@ def vm_peak(pid: int) -> int:
     return 0
 
 
-def disk_used(folder: Path) -> int:
-    total, counted = 0, 0
-    for root, dirs, files in os.walk(folder):
-        for name in files + dirs:
-            counted += 1
-            if counted > MAX_FILES_COUNTED:
-                return 1 << 62
-            try:
-                total += os.lstat(os.path.join(root, name)).st_blocks * 512
-            except FileNotFoundError:
-                pass
-    return total
+def disk_used(folder: Path | None) -> int:
+    """Bytes in the run's folder, a tmpfs of its own: the kernel's count, unlinked files too."""
+    if folder is None:
+        return 0
+    try:
+        stats = os.statvfs(folder)
+    except OSError:  # the run has just ended
+        return 0
+    return (stats.f_blocks - stats.f_bfree) * stats.f_frsize
 
 
 class RunWatch:
     """Samples a run twice a second; calls `on_limit(reason)` when it must end."""
 
-    def __init__(self, limits, uid: int, workdir: Path):
-        self.limits, self.uid, self.workdir = limits, uid, workdir
+    def __init__(self, limits, box):
+        self.limits, self.box = limits, box
         self.peaks = Usage()
         self.signs: set[str] = set()
 
@@ -114,13 +114,11 @@ class RunWatch:
         started = time.monotonic()
         while True:
             await asyncio.sleep(INTERVAL)
-            now = await asyncio.to_thread(measure, self.uid, self.workdir)
+            now = await asyncio.to_thread(measure, self.box)
             self.peaks.peak(now)
             wall = self.limits.wall_seconds
             if wall and time.monotonic() - started > wall:
                 on_limit(f"wall-clock time limit ({wall} s) reached")
-            if now.disk > self.limits.disk_mb * MB:
-                on_limit(f"disk limit ({self.limits.disk_mb} MB written) reached")
 
     def notes(self) -> list[str]:
         """The kernel-enforced limits the run came up against, for its log."""
@@ -131,6 +129,8 @@ class RunWatch:
             notes.append(f"it reached its open files limit ({limits.open_files})")
         if peaks.memory >= 0.9 * limits.memory_mb * MB or "memory" in signs:
             notes.append(f"it came up to its memory limit ({limits.memory_mb} MB)")
+        if peaks.disk >= 0.95 * limits.disk_mb * MB or "disk" in signs:
+            notes.append(f"it filled its folder ({limits.disk_mb} MB)")
         if "file_size" in signs:
             notes.append(f"it reached its file size limit ({limits.file_size_mb} MB a file)")
         return notes

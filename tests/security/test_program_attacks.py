@@ -5,17 +5,10 @@ asserted from its log and state, and the server is checked to keep serving meanw
 """
 
 import json
-import re
-import shutil
-import socket
-import subprocess
-import tempfile
 import time
-from pathlib import Path
 
 import pytest
 
-from runbox.watch import processes_of
 from tests.appliance import Appliance, wait_for
 
 LIMITS = {"wall_seconds": 4, "log_size_mb": 1, "processes": 32, "memory_mb": 200,
@@ -168,7 +161,8 @@ def test_filling_the_disk_hits_the_disk_limit(app):
         "        f.write(b'x' * 1024 * 1024)\n        f.flush()\n        time.sleep(0.05)\n"
     )
     run, log = attack(app, source)
-    assert run["state"] == "failed" and "disk limit (8 MB written) reached" in log
+    assert run["state"] == "failed" and "No space left on device" in log, log
+    assert "it filled its folder (8 MB)" in log
 
 
 def test_without_network_it_cannot_connect_anywhere(app):
@@ -186,16 +180,6 @@ print("robot api", robot.Robot().sensors()["range"])
     run, log = attack(app, source)
     assert log.count("REFUSED") == 2 and "CONNECTED" not in log
     assert "robot api 2.0" in log or "robot api" in log  # the Robot API still works
-
-
-def test_loopback_network_reaches_this_machine_only(app):
-    source = f"""
-import socket
-s = socket.create_connection(("127.0.0.1", {app.port}), timeout=2)
-print("LOOPBACK OK")
-"""
-    run, log = attack(app, source, robot="lab")
-    assert run["state"] == "finished" and "LOOPBACK OK" in log, log
 
 
 def test_one_run_cannot_reach_another(app):
@@ -225,15 +209,19 @@ for pid in range(2, 4000):
 
 
 def test_a_token_is_worthless_after_its_run(app):
-    source = "import os\nprint(os.environ['ROBOT_API_TCP'], os.environ['ROBOT_TOKEN'])\n"
+    run, log = attack(app, "import os\nprint(os.environ['ROBOT_TOKEN'])\n")
+    old_token = log.split()[0]
+    source = f"""
+import json, os, socket
+s = socket.socket(socket.AF_UNIX)
+s.connect(os.environ["ROBOT_API"][len("unix:"):])
+auth = {{"jsonrpc": "2.0", "id": 1, "method": "auth", "params": [{old_token!r}]}}
+s.sendall(json.dumps(auth).encode() + b"\\n")
+print("REPLY", s.makefile().readline())
+"""
     run, log = attack(app, source)
-    address, token = log.split()[0], log.split()[1]
-    host, port = address.rsplit(":", 1)
-    with socket.create_connection((host, int(port))) as sock:
-        request = {"jsonrpc": "2.0", "id": 1, "method": "auth", "params": [token]}
-        sock.sendall(json.dumps(request).encode() + b"\n")
-        reply = json.loads(sock.makefile().readline())
-    assert reply["error"]["code"] == -32001
+    reply = json.loads(log.split("REPLY ", 1)[1].splitlines()[0])
+    assert reply["error"]["code"] == -32001, log
 
 
 def test_markup_in_output_and_shown_values_stays_text(app):
@@ -248,66 +236,10 @@ def test_markup_in_output_and_shown_values_stays_text(app):
     assert "<b>bold</b>" not in page
 
 
-@pytest.fixture(scope="module")
-def account_app():
-    """Runs in their own accounts without a sandbox, in a data folder others may pass."""
-    data = Path(tempfile.mkdtemp(prefix="robotide-account-", dir="/tmp"))
-    app = Appliance(data, extra_env={"ROBOTIDE_RUN_ISOLATION": "account"}).start()
-    yield app
-    app.stop()
-    shutil.rmtree(data, ignore_errors=True)
-
-
-def test_without_a_sandbox_runs_still_get_their_own_account(account_app):
-    app = account_app
-    robot = app.api("GET", "/api/robots/sim").json()
-    assert robot["isolation"].startswith("own account, shared filesystem")
-    first, _ = attack_as(app, "open('notes.txt', 'w').write('private')\n")
-    source = f"""
-import os, subprocess
-print("uid", os.getuid())
-for path in [{str(app.data_dir / "secret_key")!r}, {str(app.data_dir / "robotide.sqlite3")!r},
-             {str(app.data_dir / "runs" / str(first["id"]) / "work" / "notes.txt")!r}]:
-    try:
-        print("READ", open(path).read(10))
-    except OSError as e:
-        print("DENIED", type(e).__name__)
-subprocess.Popen(["sleep", "300"])  # left behind: must end with the run
-"""
-    run, log = attack_as(app, source)
-    assert log.count("DENIED") == 3 and "READ" not in log and "uid 0" not in log, log
-    uid = int(log.split()[1])
-    wait_for(lambda: not processes_of(uid), what="the run's leftover process to end")
-
-
-def test_a_robot_whose_isolation_cannot_be_had_refuses_runs(app):
-    # The data folder of `app` is under /tmp/pytest-of-root (0700): no account can pass it.
+def test_a_robot_cannot_ask_for_runs_without_a_box(app):
     body = {"name": "bare", "url": "sim://", "settings": {"isolation": "account"}}
-    assert app.api("POST", "/api/robots", body).status_code == 201
-    wait_for(lambda: app.api("GET", "/api/robots/bare").json()["isolation"])
-    robot = app.api("GET", "/api/robots/bare").json()
-    assert "which only its owner may enter" in robot["isolation"]
-    run, log = attack(app, "print('must not run')\n", robot="bare")
-    assert run["state"] == "failed" and "must not run" not in log
-    assert "could not start" in run["reason"] and "only its owner may enter" in run["reason"]
-
-
-def attack_as(app, source):
-    program = app.create_program(f"a {time.monotonic_ns()}", source)
-    run = app.wait_run(app.run_program(program["id"])["id"])
-    return run, app.api("GET", f"/api/runs/{run['id']}/log").text
-
-
-def test_loopback_runs_are_kept_to_this_machine_by_the_firewall(app):
-    """This machine offers no test host beyond loopback to try a connection to, so the rule
-    that refuses the rest is read back, and the run's account checked to fall under it."""
-    run, log = attack(app, "import os\nprint('uid', os.getuid())\n", robot="lab")
-    uid = int(log.split()[1])
-    table = subprocess.run(
-        ["nft", "list", "table", "inet", "robotide"], capture_output=True, text=True, check=True
-    ).stdout
-    low, high = map(int, re.search(r'skuid (\d+)-(\d+) oifname != "lo" reject', table).groups())
-    assert low <= uid <= high
+    refused = app.api("POST", "/api/robots", body)
+    assert refused.status_code == 422 and "every run is boxed" in refused.text
 
 
 def test_tcl_reaches_the_robot_api_without_network(app):

@@ -1,0 +1,219 @@
+"""One run's box, from bubblewrap's start to the run's end.
+
+bubblewrap writes the sandbox's first process and its namespaces to ``--info-fd`` and then
+waits on ``--block-fd``. Meanwhile the agent puts that process in the run's cgroup (all the
+program's processes are born inside it), opens in the run's network namespace the sockets its
+robot gives programs, and starts the NAT of a `full` run. Only then does the program start.
+
+The sandbox's first process is pid 1 of the run's pid namespace: killing it ends every
+process of the run at once, whatever they did to hide (setsid, double fork, ignored signals).
+"""
+
+import asyncio
+import contextlib
+import inspect
+import json
+import logging
+import os
+import signal
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from runbox import netns
+from runbox.isolation import InForce, tool
+from runbox.netspec import blocked_ranges, host_addresses
+
+log = logging.getLogger(__name__)
+
+INFO_MAX = 64 * 1024
+NAT_READY_TIMEOUT = 10.0
+
+
+class BoxFailed(RuntimeError):
+    pass
+
+
+@dataclass(frozen=True)
+class Listener:
+    """A service on the run's 127.0.0.1: "tcp:PORT" or "udp:PORT", and what serves the socket
+    made for it there (returns something with ``async close()``)."""
+
+    service: str
+    serve: Callable[[object], Awaitable[object]]
+
+
+class Box:
+    def __init__(
+        self,
+        in_force: InForce,
+        *,
+        source: bytes,
+        filename: str,
+        disk_mb: int,
+        listeners: list[Listener] = (),
+        cgroup=None,
+        seccomp_fd: int | None = None,
+    ):
+        self.in_force, self.listeners, self.cgroup = in_force, list(listeners), cgroup
+        self.filename = filename
+        self.info_r, self.info_w = os.pipe()
+        self.block_r, self.block_w = os.pipe()
+        self.program_fd = os.memfd_create("program", 0)
+        os.write(self.program_fd, source)
+        os.lseek(self.program_fd, 0, os.SEEK_SET)
+        self.seccomp_fd = seccomp_fd
+        # Closed once done with, or at close() whatever happened in between.
+        self._fds = {self.info_r, self.info_w, self.block_r, self.block_w, self.program_fd}
+        if seccomp_fd is not None:
+            self._fds.add(seccomp_fd)
+        self.disk_mb = disk_mb
+        self.init_pid: int | None = None
+        self.pidns: int | None = None
+        self.served: list = []
+        self.nat: asyncio.subprocess.Process | None = None
+
+    # -- before the start -----------------------------------------------------------------
+
+    def args(self) -> list[str]:
+        args = ["--info-fd", str(self.info_w), "--block-fd", str(self.block_r)]
+        if self.seccomp_fd is not None:
+            args += ["--seccomp", str(self.seccomp_fd)]
+        return args + self.in_force.folder_args(self.disk_mb, self.program_fd, self.filename)
+
+    def pass_fds(self) -> tuple[int, ...]:
+        fds = (self.info_w, self.block_r, self.program_fd)
+        return fds if self.seccomp_fd is None else (*fds, self.seccomp_fd)
+
+    # -- between bubblewrap's start and the program's -------------------------------------
+
+    async def open(self) -> None:
+        """Once bubblewrap runs: cgroup, sockets, NAT, then let the program start."""
+        self._close(*self.pass_fds())  # the sandbox has them now
+        info = await self._read_info()
+        self.init_pid, self.pidns = info["child-pid"], info["pid-namespace"]
+        if self.cgroup is not None:
+            self.cgroup.add(self.init_pid)
+        if self.in_force.network != "none":
+            await self._open_loopback()
+        if self.in_force.network == "full":
+            await self._open_nat()
+        os.write(self.block_w, b"go")
+        self._close(self.block_w)
+
+    async def _read_info(self) -> dict:
+        loop = asyncio.get_running_loop()
+        data = b""
+        try:
+            while len(data) < INFO_MAX:
+                ready = loop.create_future()
+                loop.add_reader(self.info_r, ready.set_result, None)
+                try:
+                    await ready
+                finally:
+                    loop.remove_reader(self.info_r)
+                chunk = os.read(self.info_r, 4096)
+                if not chunk:
+                    break
+                data += chunk
+                with contextlib.suppress(ValueError):
+                    return json.loads(data)
+        finally:
+            self._close(self.info_r)
+        raise BoxFailed("bubblewrap ended before its sandbox was made (see the log)")
+
+    async def _open_loopback(self) -> None:
+        services = [listener.service for listener in self.listeners]
+        sockets = await asyncio.wrap_future(
+            netns.in_namespace(self.init_pid, lambda: netns.bind_loopback(services))
+        )
+        for listener, sock in zip(self.listeners, sockets, strict=True):
+            self.served.append(await listener.serve(sock))
+
+    async def _open_nat(self) -> None:
+        """slirp4netns: the run's own tap device, NAT to the internet, never to the host's
+        loopback; then routes that refuse the private ranges the robot does not allow.
+        The tap device is set up here, not by slirp4netns (whose set-up of the loopback
+        would clash with bubblewrap's)."""
+        ready_r, ready_w = os.pipe()
+        try:
+            self.nat = await asyncio.create_subprocess_exec(
+                tool("slirp4netns"), "--mtu=65520", "--disable-host-loopback",
+                "--ready-fd", str(ready_w), str(self.init_pid), "tap0",
+                pass_fds=(ready_w,), stdin=asyncio.subprocess.DEVNULL,
+                stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL,
+            )  # fmt: skip
+            os.close(ready_w)
+            ready_w = None
+            reading = asyncio.to_thread(os.read, ready_r, 1)
+            ready = await asyncio.wait_for(reading, NAT_READY_TIMEOUT)
+            if not ready:
+                raise BoxFailed("slirp4netns could not set up the run's network")
+        finally:
+            os.close(ready_r)
+            if ready_w is not None:
+                os.close(ready_w)
+        ranges = blocked_ranges(self.in_force.policy.allow_networks, host_addresses())
+        await asyncio.wrap_future(
+            netns.in_namespace(self.init_pid, lambda: netns.configure_nat(tool("ip"), ranges))
+        )
+
+    # -- while it runs ----------------------------------------------------------------------
+
+    @property
+    def folder(self) -> Path | None:
+        """The run's folder as the agent reaches it (its tmpfs lives in the run's mounts)."""
+        if self.init_pid is None:
+            return None
+        return Path(f"/proc/{self.init_pid}/root") / str(self.in_force.HOME).lstrip("/")
+
+    def processes(self) -> list[int]:
+        """The program's processes: those in the run's pid namespace, but its first."""
+        if self.pidns is None:
+            return []
+        found = []
+        for entry in os.scandir("/proc"):
+            if entry.name.isdigit() and int(entry.name) != self.init_pid:
+                with contextlib.suppress(OSError):
+                    if os.stat(f"/proc/{entry.name}/ns/pid").st_ino == self.pidns:
+                        found.append(int(entry.name))
+        return found
+
+    def signal(self, sig: int) -> None:
+        if sig == signal.SIGKILL:
+            self.kill()
+            return
+        for pid in self.processes():
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.kill(pid, sig)
+
+    def kill(self) -> None:
+        """Every process of the run, at once: the end of its pid namespace's first process
+        takes all the others with it."""
+        if self.init_pid is not None:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.kill(self.init_pid, signal.SIGKILL)
+        if self.cgroup is not None:
+            self.cgroup.kill()
+
+    # -- after the end ----------------------------------------------------------------------
+
+    async def close(self) -> None:
+        for served in self.served:
+            with contextlib.suppress(Exception):
+                closing = served.close()  # an asyncio.Server closes at once
+                if inspect.isawaitable(closing):
+                    await closing
+        self.served = []
+        if self.nat is not None and self.nat.returncode is None:
+            self.nat.kill()
+            await self.nat.wait()
+        if self.cgroup is not None:
+            await asyncio.to_thread(self.cgroup.remove)
+        self._close(*self._fds)
+
+    def _close(self, *fds: int) -> None:
+        for fd in fds:
+            if fd in self._fds:
+                self._fds.discard(fd)
+                os.close(fd)

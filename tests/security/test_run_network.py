@@ -1,0 +1,188 @@
+"""A run's network is its own: whatever its robot's setting, nothing of the host's loopback,
+its own addresses or its private ranges is reachable; only what the robot gives programs.
+
+Each probe is a student's program on a real appliance, trying the host's services: the
+PostgreSQL and Redis this machine runs, the appliance's own web server, a TCP and a UDP
+listener and an abstract Unix socket the test opens on the host.
+"""
+
+import ipaddress
+import json
+import os
+import socket
+import threading
+import time
+
+import pytest
+
+from runbox.netspec import host_addresses
+from tests.appliance import Appliance, wait_for
+from tests.security.test_program_attacks import attack
+
+PROBE = """
+import json, os, socket
+report = {}
+def tcp(host, port):
+    try:
+        socket.create_connection((host, port), timeout=2).close()
+        return "connected"
+    except OSError as e:
+        return type(e).__name__
+def udp(host, port):
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.settimeout(1.5)
+    try:
+        s.sendto(b"ping", (host, port))
+        return "answered " + s.recv(100).decode()
+    except OSError as e:
+        return type(e).__name__
+for name, (host, port) in TARGETS.items():
+    report[name] = tcp(host, port)
+report["udp"] = udp("127.0.0.1", UDP_PORT)
+try:
+    a = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    a.connect(ABSTRACT)
+    report["abstract"] = "connected"
+except OSError as e:
+    report["abstract"] = type(e).__name__
+report["proc_net_tcp"] = open("/proc/net/tcp").read().splitlines()[1:]
+report["api"] = tcp("127.0.0.1", int(os.environ["ROBOT_API_TCP"].rsplit(":", 1)[1]))
+report["routes"] = open("/proc/net/route").read().splitlines()[1:]
+print("REPORT", json.dumps(report))
+"""
+
+
+@pytest.fixture(scope="module")
+def app(tmp_path_factory):
+    app = Appliance(tmp_path_factory.mktemp("network")).start()
+    for name, network in [("lab", "loopback"), ("open", "full")]:
+        body = {"name": name, "url": "sim://", "settings": {"network": network}}
+        assert app.api("POST", "/api/robots", body).status_code == 201
+        wait_for(lambda n=name: app.api("GET", f"/api/robots/{n}/sensors").status_code == 200)
+    app.bystander = app.new_user("bystander")
+    yield app
+    app.stop()
+
+
+@pytest.fixture(scope="module")
+def host_listeners():
+    """A TCP listener, a UDP echo and an abstract socket on the host, each answering."""
+    tcp = socket.create_server(("127.0.0.1", 0))
+    udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    udp.bind(("127.0.0.1", 0))
+    abstract = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    name = f"\0robotide-test-{os.getpid()}"
+    abstract.bind(name)
+    abstract.listen()
+    stop = threading.Event()
+
+    def echo():
+        udp.settimeout(0.2)
+        while not stop.is_set():
+            try:
+                data, peer = udp.recvfrom(100)
+                udp.sendto(b"pong", peer)
+            except OSError:
+                pass
+
+    thread = threading.Thread(target=echo, daemon=True)
+    thread.start()
+    yield {"tcp": tcp.getsockname()[1], "udp": udp.getsockname()[1], "abstract": name}
+    stop.set()
+    thread.join()
+    for sock in (tcp, udp, abstract):
+        sock.close()
+
+
+def probe(app, robot, listeners, more=()):
+    targets = {
+        "postgresql": ("127.0.0.1", 5432),
+        "redis": ("127.0.0.1", 6379),
+        "web server": ("127.0.0.1", app.port),
+        "tcp listener": ("127.0.0.1", listeners["tcp"]),
+        "localhost name": ("localhost", 5432),
+        **{f"host address {a}": (a, 5432) for a in host_addresses() if a != "127.0.0.1"},
+        **dict(more),
+    }
+    source = (
+        f"TARGETS = {targets!r}\nUDP_PORT = {listeners['udp']}\n"
+        f"ABSTRACT = {listeners['abstract']!r}\n{PROBE}"
+    )
+    run, log = attack(app, source, robot=robot)
+    assert run["state"] == "finished", log
+    return json.loads(log.split("REPORT ", 1)[1].splitlines()[0]), targets
+
+
+def host_services_are_up(listeners):
+    for port in (5432, 6379, listeners["tcp"]):
+        socket.create_connection(("127.0.0.1", port), timeout=2).close()
+
+
+@pytest.mark.parametrize("robot", ["lab", "open"])
+def test_a_run_reaches_nothing_of_the_host(app, host_listeners, robot):
+    host_services_are_up(host_listeners)  # they answer the host: the probe's refusals count
+    report, targets = probe(app, robot, host_listeners)
+    for name in targets:
+        assert report[name] != "connected", (name, report)
+    assert not report["udp"].startswith("answered"), report
+    assert report["abstract"] != "connected", report
+    assert report["api"] == "connected", report  # what its robot gives programs is there
+
+
+@pytest.mark.parametrize("robot", ["lab", "open"])
+def test_proc_net_shows_the_runs_own_namespace_only(app, host_listeners, robot):
+    report, _ = probe(app, robot, host_listeners)
+    # The Robot API's listener and the probe's own connection to it, nothing else.
+    api = f"{7010:04X}"
+    for line in report["proc_net_tcp"]:
+        local, remote = line.split()[1:3]
+        assert api in (local.split(":")[1], remote.split(":")[1]), report["proc_net_tcp"]
+
+
+def test_full_network_has_a_way_out_but_not_to_private_ranges(app, host_listeners):
+    """No traffic may leave this machine in a test: the private ranges are checked in the
+    run's routing table (refusing routes), not tried; the host's loopback behind the NAT's
+    gateway and the host's own addresses are tried."""
+    report, _ = probe(
+        app, "open", host_listeners, more={"NAT gateway (the host's loopback)": ("10.0.2.2", 5432)}
+    )
+    assert report["NAT gateway (the host's loopback)"] != "connected", report
+    assert default_route(report) == ["tap0"], report["routes"]
+    refused = refused_routes(report)
+    for network in ("10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16", "169.254.0.0/16",
+                    "127.0.0.0/8", *(f"{a}/32" for a in host_addresses())):  # fmt: skip
+        assert ipaddress.ip_network(network) in refused, (network, report["routes"])
+    lab, _ = probe(app, "lab", host_listeners)
+    assert default_route(lab) == [], lab["routes"]
+
+
+def refused_routes(report) -> set:
+    """The networks /proc/net/route lists with RTF_REJECT (prohibit routes)."""
+    found = set()
+    for row in (line.split() for line in report["routes"]):
+        if int(row[3], 16) & 0x0200:
+            address = ipaddress.IPv4Address(bytes.fromhex(row[1])[::-1])
+            mask = bin(int.from_bytes(bytes.fromhex(row[7])[::-1], "big")).count("1")
+            found.add(ipaddress.ip_network(f"{address}/{mask}"))
+    return found
+
+
+def default_route(report) -> list[str]:
+    """The interfaces of the routes to 0.0.0.0/0 in the run's /proc/net/route."""
+    rows = [line.split() for line in report["routes"]]
+    return [row[0] for row in rows if row[1] == "00000000" and row[7] == "00000000"]
+
+
+def test_the_runs_of_one_robot_do_not_share_a_namespace(app):
+    waiting = "import socket, time\ns = socket.create_server(('127.0.0.1', 6000))\ntime.sleep(20)\n"
+    first = app.run_program(app.create_program("holder", waiting)["id"], robot="lab")["id"]
+    wait_for(lambda: app.api("GET", f"/api/runs/{first}").json()["state"] == "running")
+    time.sleep(0.5)
+    source = (
+        "import socket\ntry:\n    socket.create_connection(('127.0.0.1', 6000), timeout=2)\n"
+        "    print('REACHED')\nexcept OSError as e:\n    print('REFUSED', type(e).__name__)\n"
+        "s = socket.create_server(('127.0.0.1', 6000))\nprint('BOUND too')\n"
+    )
+    run, log = attack(app, source, robot="lab")
+    app.api("POST", f"/api/runs/{first}/stop")
+    assert "REFUSED" in log and "BOUND too" in log and "REACHED" not in log, log
