@@ -41,7 +41,7 @@ from robots.models import Robot, agent_channel, robot_group
 from robots.robot_api import RobotApi
 from robots.run_queue import RunQueue
 from runbox import launcher
-from runbox.box import Box, Listener
+from runbox.box import Listener, make_box
 from runbox.isolation import InForce, IsolationUnavailable, Policy, run_uid
 from runbox.relays import relay_to_host
 from runbox.supervisor import RunProcess
@@ -361,8 +361,9 @@ class RobotAgent:
         limits = launcher.Limits.from_settings(self.limits)
         token = secrets.token_urlsafe(24)
         program_env = self.gateway.program_env()
-        box = Box(
+        box = make_box(
             self.isolation,
+            socket_dir=self.socket_dir,
             source=message["source"].encode(),
             filename=message["filename"],
             disk_mb=limits.disk_mb,

@@ -16,6 +16,9 @@ import json
 import logging
 import os
 import signal
+import socket
+import sys
+import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +31,7 @@ log = logging.getLogger(__name__)
 
 INFO_MAX = 64 * 1024
 NAT_READY_TIMEOUT = 10.0
+INBOX_TIMEOUT = 10.0
 
 
 class BoxFailed(RuntimeError):
@@ -87,7 +91,7 @@ class Box:
 
     # -- between bubblewrap's start and the program's -------------------------------------
 
-    async def open(self) -> None:
+    async def open(self, launcher_pid: int) -> None:
         """Once bubblewrap runs: cgroup, sockets, NAT, then let the program start."""
         self._close(*self.pass_fds())  # the sandbox has them now
         info = await self._read_info()
@@ -127,6 +131,9 @@ class Box:
         sockets = await asyncio.wrap_future(
             netns.in_namespace(self.init_pid, lambda: netns.bind_loopback(services))
         )
+        await self._serve(sockets)
+
+    async def _serve(self, sockets: list[socket.socket]) -> None:
         for listener, sock in zip(self.listeners, sockets, strict=True):
             self.served.append(await listener.serve(sock))
 
@@ -217,3 +224,80 @@ class Box:
             if fd in self._fds:
                 self._fds.discard(fd)
                 os.close(fd)
+
+
+class RootlessBox(Box):
+    """The box of an agent that is not root: runbox.inbox makes it from the inside and hands
+    the run's sockets over its control socket; the agent answers "go" once it is ready."""
+
+    def __init__(self, in_force: InForce, *, socket_dir: Path, **options):
+        super().__init__(in_force, **options)
+        self._close(self.info_r, self.info_w, self.block_r, self.block_w)
+        self.control, theirs = socket.socketpair()
+        self.theirs = theirs.detach()
+        self._fds.add(self.theirs)
+        self.spec = in_force.inbox_spec(socket_dir, self.disk_mb, self.filename)
+
+    def args(self) -> list[str]:
+        return [str(self.theirs)]
+
+    def pass_fds(self) -> tuple[int, ...]:
+        fds = (self.theirs, self.program_fd)
+        return fds if self.seccomp_fd is None else (*fds, self.seccomp_fd)
+
+    async def open(self, launcher_pid: int) -> None:
+        spec = {
+            **self.spec, "program_fd": self.program_fd, "seccomp_fd": self.seccomp_fd,
+            "services": [listener.service for listener in self.listeners],
+        }  # fmt: skip
+        self._close(*self.pass_fds())
+        try:
+            sockets = await asyncio.to_thread(self._handshake, spec)
+            self.init_pid = first_child(launcher_pid)
+            self.pidns = os.stat(f"/proc/{self.init_pid}/ns/pid").st_ino
+            if self.cgroup is not None:
+                self.cgroup.add(self.init_pid)
+            await self._serve(sockets)
+            self.control.sendall(b"go\n")
+        finally:
+            self.control.close()
+
+    def _handshake(self, spec: dict) -> list[socket.socket]:
+        self.control.settimeout(INBOX_TIMEOUT)
+        self.control.sendall(json.dumps(spec).encode() + b"\n")
+        size = len(self.listeners) * 4
+        try:
+            message, ancillary, _, _ = self.control.recvmsg(64, socket.CMSG_SPACE(size))
+        except TimeoutError:
+            raise BoxFailed("the run's box did not get ready in time") from None
+        if message != b"ready\n":
+            raise BoxFailed("the run's box could not be made (see the log)")
+        fds = [
+            int.from_bytes(data[i : i + 4], sys.byteorder)
+            for level, kind, data in ancillary
+            if level == socket.SOL_SOCKET and kind == socket.SCM_RIGHTS
+            for i in range(0, len(data) - len(data) % 4, 4)
+        ]
+        sockets = [socket.socket(fileno=fd) for fd in fds]
+        for sock in sockets:
+            sock.setblocking(False)
+        return sockets
+
+
+def first_child(pid: int) -> int:
+    """unshare --fork's one child: the first process of the run's pid namespace."""
+    deadline = time.monotonic() + INBOX_TIMEOUT
+    while time.monotonic() < deadline:
+        with contextlib.suppress(OSError):
+            children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+            if children:
+                return int(children[0])
+        time.sleep(0.001)
+    raise BoxFailed("the run's box did not start")
+
+
+def make_box(in_force: InForce, *, socket_dir: Path, **options) -> Box:
+    """The box a run gets here: made by bubblewrap and the agent as root, else from inside."""
+    if in_force.rootless:
+        return RootlessBox(in_force, socket_dir=socket_dir, **options)
+    return Box(in_force, **options)

@@ -24,6 +24,7 @@ run with a message saying what to install; nothing falls back to running unboxed
 
 import os
 import shutil
+import subprocess
 import zlib
 from dataclasses import dataclass, field
 from functools import cache
@@ -37,6 +38,9 @@ UID_BASE = 1_000_000_000
 SLOTS, RUNS_PER_SLOT = 1000, 1_000_000
 # The id a rootless run has inside its user namespace (the agent's own outside).
 ROOTLESS_UID = 1000
+TOPS = ("bin", "sbin", "lib", "lib32", "lib64", "libx32")  # besides /usr, maybe links into it
+INBOX = Path(__file__).resolve().parent / "inbox.py"
+SYSTEM_PYTHON = "/usr/bin/python3"  # runs the rootless box's first process
 # The server's tools may live in sbin; programs' PATH (SYSTEM_PATH) has no need of it.
 TOOLS_PATH = f"/usr/local/sbin:/usr/sbin:/sbin:{SYSTEM_PATH}"
 
@@ -81,16 +85,13 @@ class Policy:
 
     def resolve(self, clients_dir: Path) -> "InForce":
         """What this machine gives for the policy, or IsolationUnavailable saying why not."""
+        rootless = os.geteuid() != 0
+        if rootless:
+            return self._resolve_rootless(clients_dir)
         if bwrap_path() is None:
             raise IsolationUnavailable(
                 "runs are boxed with bubblewrap, which is not installed"
                 " (apt-get install bubblewrap)"
-            )
-        rootless = os.geteuid() != 0
-        if rootless and self.network != "none":
-            raise IsolationUnavailable(
-                f"network {self.network!r} needs robotide to run as root for now (its sockets"
-                " are made inside the run's namespace); choose network 'none'"
             )
         if self.network == "full" and shutil.which("slirp4netns", path=TOOLS_PATH) is None:
             raise IsolationUnavailable(
@@ -98,6 +99,21 @@ class Policy:
                 " or choose network 'loopback'"
             )
         return InForce(self, clients_dir, rootless)
+
+    def _resolve_rootless(self, clients_dir: Path) -> "InForce":
+        if self.network == "full":
+            raise IsolationUnavailable(
+                "network 'full' needs robotide to run as root (its NAT is set up from"
+                " outside the run); choose network 'loopback' or 'none'"
+            )
+        if not os.path.exists(SYSTEM_PYTHON) or shutil.which("unshare", path=TOOLS_PATH) is None:
+            raise IsolationUnavailable(f"rootless runs need {SYSTEM_PYTHON} and util-linux")
+        if not user_namespaces_allowed():
+            raise IsolationUnavailable(
+                "rootless runs need unprivileged user namespaces, which this kernel refuses"
+                " (sysctl kernel.unprivileged_userns_clone=1), or run robotide as root"
+            )
+        return InForce(self, clients_dir, rootless=True)
 
 
 @dataclass(frozen=True)
@@ -143,13 +159,32 @@ class InForce:
     def wrap(self, argv: list[str], uid: int, socket_dir: Path, box_args: list[str]) -> list[str]:
         """The command inside its box. bubblewrap runs first, as the server's account, so it
         can mount what the run may see; as root, setpriv inside drops to the run's account."""
-        if self.rootless:  # bubblewrap maps the server's account to `uid` and drops all else
-            return [*self.bwrap(socket_dir), *box_args, "--", *argv]
+        if self.rootless:  # the box's first process does it all from inside (runbox.inbox)
+            return [*self.unshare(), *box_args, "--", *argv]
         account = [
             tool("setpriv"), f"--reuid={uid}", f"--regid={uid}", "--clear-groups",
             "--no-new-privs", "--",
         ]  # fmt: skip
         return [*self.bwrap(socket_dir), *box_args, "--", *account, *argv]
+
+    def unshare(self) -> list[str]:
+        """Rootless: util-linux makes the namespaces (it is on every Debian machine), the
+        system's python3 runs runbox/inbox.py in them; both end with the agent."""
+        return [
+            tool("setpriv"), "--pdeathsig", "KILL", "--",
+            tool("unshare"), "--user", "--map-root-user", "--mount", "--pid", "--fork",
+            "--net", "--ipc", "--uts", "--kill-child", "--",
+            SYSTEM_PYTHON, "-I", "-S", str(INBOX),
+        ]  # fmt: skip
+
+    def inbox_spec(self, socket_dir: Path, disk_mb: int, filename: str) -> dict:
+        readonly = ["/usr", "/etc", *(f"/{top}" for top in TOPS)]
+        return {
+            "readonly": readonly, "clients": str(self.clients_dir),
+            "clients_at": str(self.CLIENTS), "api_dir": str(socket_dir),
+            "api_at": str(self.API_DIR), "home": str(self.HOME), "filename": filename,
+            "tmp_mb": self.policy.tmp_mb, "disk_mb": disk_mb,
+        }  # fmt: skip
 
     def bwrap(self, socket_dir: Path) -> list[str]:
         args = [
@@ -164,10 +199,7 @@ class InForce:
             "--ro-bind", str(self.clients_dir), str(self.CLIENTS),
             "--bind", str(socket_dir), str(self.API_DIR),
         ]  # fmt: skip
-        if self.rootless:
-            args += ["--unshare-user", "--disable-userns", "--uid", str(ROOTLESS_UID),
-                     "--gid", str(ROOTLESS_UID)]  # fmt: skip
-        for top in ("bin", "sbin", "lib", "lib32", "lib64", "libx32"):
+        for top in TOPS:
             path = Path("/") / top
             if path.is_symlink():
                 args += ["--symlink", os.readlink(path), str(path)]
@@ -197,6 +229,14 @@ def tool(name: str) -> str:
     if path is None:
         raise IsolationUnavailable(f"{name} (util-linux) is needed to launch programs")
     return path
+
+
+@cache
+def user_namespaces_allowed() -> bool:
+    done = subprocess.run(
+        [tool("unshare"), "--user", "--map-root-user", "true"], capture_output=True, timeout=10
+    )
+    return done.returncode == 0
 
 
 @cache

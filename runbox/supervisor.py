@@ -124,7 +124,7 @@ class RunProcess:
             raise
         if self.box is not None:
             try:
-                await self.box.open()
+                await self.box.open(self.pid)
             except Exception as exc:  # the program never starts: the run fails, saying why
                 self.system_line(f"its box could not be made: {exc}")
                 self._stop_reason, self._stop_state = f"could not start: {exc}", "failed"

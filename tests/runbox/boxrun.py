@@ -1,0 +1,87 @@
+"""Run one program in a box, as the agent would, and print what happened as JSON.
+
+    python3 boxrun.py '{"source": "...", "network": "loopback", "limits": {...}}'
+
+Standard library and runbox only, so that an ordinary user's python3 runs it too (the
+rootless box); the Robot API is stood in for by a TCP echo on the run's 127.0.0.1:7010.
+"""
+
+import asyncio
+import json
+import socket
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+
+from runbox import launcher  # noqa: E402
+from runbox.box import Listener, make_box  # noqa: E402
+from runbox.isolation import Policy  # noqa: E402
+from runbox.supervisor import RunProcess  # noqa: E402
+from runbox.watch import RunWatch  # noqa: E402
+
+PYTHON = type("Python", (), {
+    "command": lambda self, path: ["/usr/bin/python3", path], "env": {},
+    "client_env": lambda self, clients=None: {},
+})()  # fmt: skip
+
+
+class Echo:
+    """Answers a connection on the run's 127.0.0.1:7010 with what it sent."""
+
+    async def serve(self, sock):
+        return await asyncio.start_server(self.echo, sock=sock)
+
+    async def echo(self, reader, writer):
+        writer.write(await reader.readline())
+        await writer.drain()
+        writer.close()
+
+
+async def run(spec: dict) -> dict:
+    policy = Policy.from_settings({"network": spec.get("network", "loopback")})
+    folder = Path(tempfile.mkdtemp(prefix="boxrun-"))
+    clients = folder / "clients"
+    clients.mkdir()
+    sockets = folder / "sockets"
+    sockets.mkdir()
+    in_force = policy.resolve(clients)
+    limits = launcher.Limits.from_settings(spec.get("limits", {}))
+    listeners = [] if policy.network == "none" else [Listener("tcp:7010", Echo().serve)]
+    box = make_box(
+        in_force, socket_dir=sockets, source=spec["source"].encode(), filename="main.py",
+        disk_mb=limits.disk_mb, listeners=listeners,
+    )  # fmt: skip
+    argv = launcher.command(
+        PYTHON, in_force.home() / "main.py", limits, isolation=in_force,
+        uid=in_force.uid(int(time.time()) % 100_000, str(folder)), socket_dir=sockets,
+        box_args=box.args(),
+    )  # fmt: skip
+    lines = []
+    process = RunProcess(
+        argv, env=launcher.environment(PYTHON, in_force.home(), {}), cwd=folder,
+        log_path=folder / "output.log", on_output=lambda batch, *_: lines.extend(batch),
+        watch=RunWatch(limits, box), box=box, grace=float(spec.get("grace", 1.0)),
+    )  # fmt: skip
+    started = time.monotonic()
+    await process.start()
+    if spec.get("stop_after"):
+        await asyncio.sleep(spec["stop_after"])
+        process.stop()
+    outcome = await process.wait()
+    left = box.processes()
+    await box.close()
+    log = (folder / "output.log").read_text()
+    return {
+        "state": outcome.state, "exit_code": outcome.exit_code, "reason": outcome.reason,
+        "log": log, "seconds": time.monotonic() - started, "left": left,
+        "rootless": in_force.rootless,
+    }  # fmt: skip
+
+
+if __name__ == "__main__":
+    socket.setdefaulttimeout(10)
+    print(json.dumps(asyncio.run(run(json.loads(sys.argv[1])))))
