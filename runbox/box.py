@@ -32,6 +32,7 @@ log = logging.getLogger(__name__)
 INFO_MAX = 64 * 1024
 NAT_READY_TIMEOUT = 10.0
 INBOX_TIMEOUT = 10.0
+GONE_TIMEOUT = 5.0
 
 
 class BoxFailed(RuntimeError):
@@ -206,6 +207,13 @@ class Box:
     # -- after the end ----------------------------------------------------------------------
 
     async def close(self) -> None:
+        """After the program's end: whatever of the run is still there ends now (the
+        kernel ends a pid namespace's processes one by one), then its sockets, NAT and
+        cgroup go."""
+        deadline = time.monotonic() + GONE_TIMEOUT
+        while self.processes() and time.monotonic() < deadline:
+            self.kill()
+            await asyncio.sleep(0.01)
         for served in self.served:
             with contextlib.suppress(Exception):
                 closing = served.close()  # an asyncio.Server closes at once

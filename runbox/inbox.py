@@ -182,6 +182,7 @@ def serve_as_init(child: int) -> int:
 
 def main() -> int:
     control = socket.socket(fileno=int(sys.argv[1]))
+    control.setblocking(True)  # whatever the file's flags came as
     argv = sys.argv[sys.argv.index("--") + 1 :]
     reader = control.makefile("rb")
     spec = json.loads(reader.readline())

@@ -72,8 +72,8 @@ async def run(spec: dict) -> dict:
         await asyncio.sleep(spec["stop_after"])
         process.stop()
     outcome = await process.wait()
-    left = box.processes()
     await box.close()
+    left = box.processes()
     log = (folder / "output.log").read_text()
     return {
         "state": outcome.state, "exit_code": outcome.exit_code, "reason": outcome.reason,

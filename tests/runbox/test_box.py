@@ -1,0 +1,117 @@
+"""The run box, as root (bubblewrap) and as an ordinary user (unshare + runbox/inbox.py).
+
+Each case runs a program through tests/runbox/boxrun.py, the way the agent does, with the
+system's python3: as root, and as the account `nobody` for the rootless box (a copy of the
+code where that account can read it).
+"""
+
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+NOBODY = 65534
+
+
+@pytest.fixture(scope="module")
+def readable_copy(tmp_path_factory):
+    """runbox/ and boxrun.py where an ordinary account may read them."""
+    folder = Path(tempfile_dir := tmp_path_factory.mktemp("boxcode"))
+    for parent in [folder, *folder.parents]:
+        if parent == Path("/"):
+            break
+        parent.chmod(parent.stat().st_mode | 0o005)
+    shutil.copytree(
+        ROOT / "runbox", folder / "runbox", ignore=shutil.ignore_patterns("__pycache__")
+    )
+    (folder / "tests" / "runbox").mkdir(parents=True)
+    shutil.copy(ROOT / "tests" / "runbox" / "boxrun.py", folder / "tests" / "runbox")
+    for path in folder.rglob("*"):
+        path.chmod(path.stat().st_mode | 0o005)
+    return tempfile_dir
+
+
+def box_run(mode: str, code: Path, source: str, **spec) -> dict:
+    script = str(code / "tests" / "runbox" / "boxrun.py")
+    argv = ["/usr/bin/python3", script, json.dumps({"source": source, **spec})]
+    if mode == "rootless":
+        argv = ["setpriv", f"--reuid={NOBODY}", f"--regid={NOBODY}", "--clear-groups", *argv]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=120, cwd="/")
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert result["rootless"] == (mode == "rootless")
+    return result
+
+
+MODES = ["root", "rootless"]
+if os.geteuid() != 0:
+    MODES = ["rootless"]
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_the_run_sees_its_own_folder_and_services_only(mode, readable_copy):
+    source = """
+import os, socket
+print("uid", os.getuid(), "cwd", os.getcwd(), "files", os.listdir("."))
+print("root", sorted(os.listdir("/")))
+s = socket.create_connection(("127.0.0.1", 7010)); s.sendall(b"echo\\n"); print("api", s.recv(10))
+for port in (5432, 6379):
+    try:
+        socket.create_connection(("127.0.0.1", port), timeout=1); print("REACHED", port)
+    except OSError as e:
+        print("refused", port)
+print("tcp", len(open("/proc/net/tcp").read().splitlines()) - 1)
+for path in ["/root", "/var", "/work", "/tmp/boxcode0"]:
+    print("visible" if os.path.exists(path) else "hidden", path)
+"""
+    result = box_run(mode, readable_copy, source)
+    log = result["log"]
+    assert result["state"] == "finished", log
+    assert "cwd /home/robot files ['main.py']" in log
+    assert "api b'echo\\n'" in log and "REACHED" not in log
+    assert "refused 5432" in log and "refused 6379" in log
+    assert int(log.split("o tcp ")[1].split()[0]) <= 3  # the echo's listener and connection
+    assert "visible" not in log, log
+    uid = int(log.split("o uid ")[1].split()[0])
+    assert uid == 1000 if mode == "rootless" else uid >= 1_000_000_000
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_unlinked_files_count_against_the_folder(mode, readable_copy):
+    """24 files of 60 MB, each unlinked and held open: the folder's tmpfs says no."""
+    source = """
+import os
+held, written = [], 0
+try:
+    for i in range(24):
+        f = open(f"big{i}", "wb"); os.unlink(f"big{i}"); held.append(f)
+        for _ in range(60):
+            f.write(b"x" * 2**20); f.flush(); written += 1
+except OSError as e:
+    print("REFUSED after", written, "MB:", e.strerror)
+print("done", written)
+"""
+    result = box_run(mode, readable_copy, source, limits={"disk_mb": 64, "memory_mb": 1024})
+    log = result["log"]
+    assert "REFUSED after" in log and "No space left on device" in log, log
+    assert int(log.split("REFUSED after ")[1].split()[0]) <= 64
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_stop_ends_every_process_of_the_run(mode, readable_copy):
+    """A program that ignores SIGTERM and leaves a grandchild in a session of its own."""
+    source = """
+import os, signal, subprocess, time
+signal.signal(signal.SIGTERM, signal.SIG_IGN)
+subprocess.Popen(["sh", "-c", "trap '' TERM; sleep 300"], start_new_session=True)
+print("started", flush=True)
+time.sleep(300)
+"""
+    result = box_run(mode, readable_copy, source, stop_after=1.0, grace=0.5)
+    assert result["state"] == "stopped", result
+    assert "did not stop within 0.5 s: sending SIGKILL" in result["log"]
+    assert result["left"] == [] and result["seconds"] < 10
