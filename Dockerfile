@@ -1,9 +1,9 @@
 FROM python:3.11-slim-bookworm
-# util-linux: setpriv and prlimit; bubblewrap: the runs' sandbox; nftables: their network;
+# util-linux: setpriv and prlimit; bubblewrap: the runs' box; slirp4netns: network 'full';
 # the languages programs are written in, and what their clients use; espeak-ng and ffmpeg:
 # speech and cameras for programs.
 RUN apt-get update && apt-get install -y --no-install-recommends \
-        util-linux bash bubblewrap nftables \
+        util-linux bash bubblewrap slirp4netns \
         perl ruby lua5.4 lua-socket tcl tcllib nodejs \
         espeak-ng ffmpeg \
     && rm -rf /var/lib/apt/lists/*

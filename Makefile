@@ -13,6 +13,7 @@ $(BIN)/robotide: pyproject.toml
 	touch $@
 
 run: $(BIN)/robotide
+	./scripts/install-run-deps.sh
 	$(BIN)/robotide up $(if $(BIND),--bind $(BIND))
 
 test: $(BIN)/robotide

@@ -1,7 +1,7 @@
 #!/bin/sh
 # What the tests need from the machine, from Debian's archive, installed only when missing:
-# Chromium (browser tests), util-linux (setpriv, prlimit), bubblewrap and nftables (the runs'
-# sandbox and network), the languages' interpreters, PostgreSQL and Redis (fleet mode), started
+# Chromium (browser tests), util-linux (setpriv, prlimit, unshare), bubblewrap and slirp4netns
+# (the runs' box and the NAT of network 'full'), the languages' interpreters, PostgreSQL and Redis (fleet mode), started
 # if they are not running, espeak-ng and ffmpeg (speech and cameras for programs).
 set -eu
 need=""
@@ -10,7 +10,7 @@ have chromium || need="$need chromium"
 have setpriv || need="$need util-linux"
 have prlimit || need="$need util-linux"
 have bwrap || need="$need bubblewrap"
-have nft || need="$need nftables"
+have slirp4netns || need="$need slirp4netns"
 [ -x /usr/bin/python3 ] || need="$need python3"
 # The languages programs are written in (programs/languages.py) and what their clients use.
 have perl || need="$need perl"
