@@ -49,6 +49,8 @@ class Listener:
 
 
 class Box:
+    """What every box has: the program's file, its sockets, its processes, its end."""
+
     def __init__(
         self,
         in_force: InForce,
@@ -62,109 +64,21 @@ class Box:
     ):
         self.in_force, self.listeners, self.cgroup = in_force, list(listeners), cgroup
         self.filename = filename
-        self.info_r, self.info_w = os.pipe()
-        self.block_r, self.block_w = os.pipe()
         self.program_fd = os.memfd_create("program", 0)
         os.write(self.program_fd, source)
         os.lseek(self.program_fd, 0, os.SEEK_SET)
         self.seccomp_fd = seccomp_fd
         # Closed once done with, or at close() whatever happened in between.
-        self._fds = {self.info_r, self.info_w, self.block_r, self.block_w, self.program_fd}
-        if seccomp_fd is not None:
-            self._fds.add(seccomp_fd)
+        self._fds = {self.program_fd} | ({seccomp_fd} if seccomp_fd is not None else set())
         self.disk_mb = disk_mb
         self.init_pid: int | None = None
         self.pidns: int | None = None
         self.served: list = []
         self.nat: asyncio.subprocess.Process | None = None
 
-    # -- before the start -----------------------------------------------------------------
-
-    def args(self) -> list[str]:
-        args = ["--info-fd", str(self.info_w), "--block-fd", str(self.block_r)]
-        if self.seccomp_fd is not None:
-            args += ["--seccomp", str(self.seccomp_fd)]
-        return args + self.in_force.folder_args(self.disk_mb, self.program_fd, self.filename)
-
-    def pass_fds(self) -> tuple[int, ...]:
-        fds = (self.info_w, self.block_r, self.program_fd)
-        return fds if self.seccomp_fd is None else (*fds, self.seccomp_fd)
-
-    # -- between bubblewrap's start and the program's -------------------------------------
-
-    async def open(self, launcher_pid: int) -> None:
-        """Once bubblewrap runs: cgroup, sockets, NAT, then let the program start."""
-        self._close(*self.pass_fds())  # the sandbox has them now
-        info = await self._read_info()
-        self.init_pid, self.pidns = info["child-pid"], info["pid-namespace"]
-        if self.cgroup is not None:
-            self.cgroup.add(self.init_pid)
-        if self.in_force.network != "none":
-            await self._open_loopback()
-        if self.in_force.network == "full":
-            await self._open_nat()
-        os.write(self.block_w, b"go")
-        self._close(self.block_w)
-
-    async def _read_info(self) -> dict:
-        loop = asyncio.get_running_loop()
-        data = b""
-        try:
-            while len(data) < INFO_MAX:
-                ready = loop.create_future()
-                loop.add_reader(self.info_r, ready.set_result, None)
-                try:
-                    await ready
-                finally:
-                    loop.remove_reader(self.info_r)
-                chunk = os.read(self.info_r, 4096)
-                if not chunk:
-                    break
-                data += chunk
-                with contextlib.suppress(ValueError):
-                    return json.loads(data)
-        finally:
-            self._close(self.info_r)
-        raise BoxFailed("bubblewrap ended before its sandbox was made (see the log)")
-
-    async def _open_loopback(self) -> None:
-        services = [listener.service for listener in self.listeners]
-        sockets = await asyncio.wrap_future(
-            netns.in_namespace(self.init_pid, lambda: netns.bind_loopback(services))
-        )
-        await self._serve(sockets)
-
     async def _serve(self, sockets: list[socket.socket]) -> None:
         for listener, sock in zip(self.listeners, sockets, strict=True):
             self.served.append(await listener.serve(sock))
-
-    async def _open_nat(self) -> None:
-        """slirp4netns: the run's own tap device, NAT to the internet, never to the host's
-        loopback; then routes that refuse the private ranges the robot does not allow.
-        The tap device is set up here, not by slirp4netns (whose set-up of the loopback
-        would clash with bubblewrap's)."""
-        ready_r, ready_w = os.pipe()
-        try:
-            self.nat = await asyncio.create_subprocess_exec(
-                tool("slirp4netns"), "--mtu=65520", "--disable-host-loopback",
-                "--ready-fd", str(ready_w), str(self.init_pid), "tap0",
-                pass_fds=(ready_w,), stdin=asyncio.subprocess.DEVNULL,
-                stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL,
-            )  # fmt: skip
-            os.close(ready_w)
-            ready_w = None
-            reading = asyncio.to_thread(os.read, ready_r, 1)
-            ready = await asyncio.wait_for(reading, NAT_READY_TIMEOUT)
-            if not ready:
-                raise BoxFailed("slirp4netns could not set up the run's network")
-        finally:
-            os.close(ready_r)
-            if ready_w is not None:
-                os.close(ready_w)
-        ranges = blocked_ranges(self.in_force.policy.allow_networks, host_addresses())
-        await asyncio.wrap_future(
-            netns.in_namespace(self.init_pid, lambda: netns.configure_nat(tool("ip"), ranges))
-        )
 
     # -- while it runs ----------------------------------------------------------------------
 
@@ -234,13 +148,107 @@ class Box:
                 os.close(fd)
 
 
+class BwrapBox(Box):
+    """The box of an agent that is root: bubblewrap makes it, the agent opens its sockets
+    from outside (runbox.netns) between bubblewrap's start and the program's."""
+
+    # -- before the start -----------------------------------------------------------------
+
+    def __init__(self, in_force: InForce, **options):
+        super().__init__(in_force, **options)
+        self.info_r, self.info_w = os.pipe()
+        self.block_r, self.block_w = os.pipe()
+        self._fds |= {self.info_r, self.info_w, self.block_r, self.block_w}
+
+    def args(self) -> list[str]:
+        args = ["--info-fd", str(self.info_w), "--block-fd", str(self.block_r)]
+        if self.seccomp_fd is not None:
+            args += ["--seccomp", str(self.seccomp_fd)]
+        return args + self.in_force.folder_args(self.disk_mb, self.program_fd, self.filename)
+
+    def pass_fds(self) -> tuple[int, ...]:
+        fds = (self.info_w, self.block_r, self.program_fd)
+        return fds if self.seccomp_fd is None else (*fds, self.seccomp_fd)
+
+    # -- between bubblewrap's start and the program's -------------------------------------
+
+    async def open(self, launcher_pid: int) -> None:
+        """Once bubblewrap runs: cgroup, sockets, NAT, then let the program start."""
+        self._close(*self.pass_fds())  # the sandbox has them now
+        info = await self._read_info()
+        self.init_pid, self.pidns = info["child-pid"], info["pid-namespace"]
+        if self.cgroup is not None:
+            self.cgroup.add(self.init_pid)
+        if self.in_force.network != "none":
+            await self._open_loopback()
+        if self.in_force.network == "full":
+            await self._open_nat()
+        os.write(self.block_w, b"go")
+        self._close(self.block_w)
+
+    async def _read_info(self) -> dict:
+        loop = asyncio.get_running_loop()
+        data = b""
+        try:
+            while len(data) < INFO_MAX:
+                ready = loop.create_future()
+                loop.add_reader(self.info_r, ready.set_result, None)
+                try:
+                    await ready
+                finally:
+                    loop.remove_reader(self.info_r)
+                chunk = os.read(self.info_r, 4096)
+                if not chunk:
+                    break
+                data += chunk
+                with contextlib.suppress(ValueError):
+                    return json.loads(data)
+        finally:
+            self._close(self.info_r)
+        raise BoxFailed("bubblewrap ended before its sandbox was made (see the log)")
+
+    async def _open_loopback(self) -> None:
+        services = [listener.service for listener in self.listeners]
+        sockets = await asyncio.wrap_future(
+            netns.in_namespace(self.init_pid, lambda: netns.bind_loopback(services))
+        )
+        await self._serve(sockets)
+
+    async def _open_nat(self) -> None:
+        """slirp4netns: the run's own tap device, NAT to the internet, never to the host's
+        loopback; then routes that refuse the private ranges the robot does not allow.
+        The tap device is set up here, not by slirp4netns (whose set-up of the loopback
+        would clash with bubblewrap's)."""
+        ready_r, ready_w = os.pipe()
+        try:
+            self.nat = await asyncio.create_subprocess_exec(
+                tool("slirp4netns"), "--mtu=65520", "--disable-host-loopback",
+                "--ready-fd", str(ready_w), str(self.init_pid), "tap0",
+                pass_fds=(ready_w,), stdin=asyncio.subprocess.DEVNULL,
+                stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL,
+            )  # fmt: skip
+            os.close(ready_w)
+            ready_w = None
+            reading = asyncio.to_thread(os.read, ready_r, 1)
+            ready = await asyncio.wait_for(reading, NAT_READY_TIMEOUT)
+            if not ready:
+                raise BoxFailed("slirp4netns could not set up the run's network")
+        finally:
+            os.close(ready_r)
+            if ready_w is not None:
+                os.close(ready_w)
+        ranges = blocked_ranges(self.in_force.policy.allow_networks, host_addresses())
+        await asyncio.wrap_future(
+            netns.in_namespace(self.init_pid, lambda: netns.configure_nat(tool("ip"), ranges))
+        )
+
+
 class RootlessBox(Box):
     """The box of an agent that is not root: runbox.inbox makes it from the inside and hands
     the run's sockets over its control socket; the agent answers "go" once it is ready."""
 
     def __init__(self, in_force: InForce, *, socket_dir: Path, **options):
         super().__init__(in_force, **options)
-        self._close(self.info_r, self.info_w, self.block_r, self.block_w)
         self.control, theirs = socket.socketpair()
         self.theirs = theirs.detach()
         self._fds.add(self.theirs)
@@ -308,4 +316,4 @@ def make_box(in_force: InForce, *, socket_dir: Path, **options) -> Box:
     """The box a run gets here: made by bubblewrap and the agent as root, else from inside."""
     if in_force.rootless:
         return RootlessBox(in_force, socket_dir=socket_dir, **options)
-    return Box(in_force, **options)
+    return BwrapBox(in_force, **options)
