@@ -40,7 +40,7 @@ from robots.lease import ControlLease, Holder, LeaseHeld
 from robots.models import Robot, agent_channel, robot_group
 from robots.robot_api import RobotApi
 from robots.run_queue import RunQueue
-from runbox import launcher
+from runbox import launcher, seccomp
 from runbox.box import Listener, make_box
 from runbox.isolation import InForce, IsolationUnavailable, Policy, run_uid
 from runbox.relays import relay_to_host
@@ -368,6 +368,7 @@ class RobotAgent:
             filename=message["filename"],
             disk_mb=limits.disk_mb,
             listeners=self._listeners(program_env),
+            seccomp_fd=seccomp.open_filter_fd(),
         )
         extra = {
             "ROBOT_API": f"unix:{self.isolation.api_dir() / self.server.unix_path.name}",

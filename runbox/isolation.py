@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
 
-from runbox import SYSTEM_PATH
+from runbox import SYSTEM_PATH, seccomp
 
 ISOLATIONS = ("auto", "sandbox")
 NETWORKS = ("none", "loopback", "full")
@@ -85,6 +85,11 @@ class Policy:
 
     def resolve(self, clients_dir: Path) -> "InForce":
         """What this machine gives for the policy, or IsolationUnavailable saying why not."""
+        if not seccomp.available():
+            raise IsolationUnavailable(
+                "runs get a seccomp filter, and libseccomp cannot make one here"
+                " (apt-get install libseccomp2)"
+            )
         rootless = os.geteuid() != 0
         if rootless:
             return self._resolve_rootless(clients_dir)
@@ -133,7 +138,8 @@ class InForce:
 
     def describe(self, cgroups: str = "") -> str:
         account = "own user namespace" if self.rootless else "own OS account"
-        parts = [f"sandbox (bubblewrap), {account}, network {self.network}"]
+        box = "rootless box (user namespaces)" if self.rootless else "sandbox (bubblewrap)"
+        parts = [f"{box}, {account}, seccomp, network {self.network}"]
         if cgroups:
             parts.append(cgroups)
         return "; ".join(parts)

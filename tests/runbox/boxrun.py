@@ -17,7 +17,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from runbox import launcher  # noqa: E402
+from runbox import launcher, seccomp  # noqa: E402
 from runbox.box import Listener, make_box  # noqa: E402
 from runbox.isolation import Policy  # noqa: E402
 from runbox.supervisor import RunProcess  # noqa: E402
@@ -53,7 +53,7 @@ async def run(spec: dict) -> dict:
     listeners = [] if policy.network == "none" else [Listener("tcp:7010", Echo().serve)]
     box = make_box(
         in_force, socket_dir=sockets, source=spec["source"].encode(), filename="main.py",
-        disk_mb=limits.disk_mb, listeners=listeners,
+        disk_mb=limits.disk_mb, listeners=listeners, seccomp_fd=seccomp.open_filter_fd(),
     )  # fmt: skip
     argv = launcher.command(
         PYTHON, in_force.home() / "main.py", limits, isolation=in_force,

@@ -115,3 +115,16 @@ time.sleep(300)
     assert result["state"] == "stopped", result
     assert "did not stop within 0.5 s: sending SIGKILL" in result["log"]
     assert result["left"] == [] and result["seconds"] < 10
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_the_run_cannot_make_namespaces_or_mount(mode, readable_copy):
+    source = """
+import subprocess
+for argv in (["unshare", "-Ur", "true"], ["unshare", "-n", "true"],
+             ["mount", "-t", "tmpfs", "x", "/tmp"]):
+    done = subprocess.run(argv, capture_output=True)
+    print("ALLOWED" if done.returncode == 0 else "refused", argv[:2])
+"""
+    result = box_run(mode, readable_copy, source)
+    assert result["log"].count("refused") == 3 and "ALLOWED" not in result["log"], result

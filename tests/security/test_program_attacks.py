@@ -242,6 +242,16 @@ def test_a_robot_cannot_ask_for_runs_without_a_box(app):
     assert refused.status_code == 422 and "every run is boxed" in refused.text
 
 
+def test_it_cannot_make_a_user_namespace_of_its_own(app):
+    """From there it would be root of a namespace: mounts, network set-up, kernel surface."""
+    source = (
+        "import subprocess\ndone = subprocess.run(['unshare', '-Ur', 'id'], capture_output=True)\n"
+        "print('ALLOWED' if done.returncode == 0 else 'refused', done.stdout, done.stderr)\n"
+    )
+    run, log = attack(app, source, robot="lab")
+    assert "refused" in log and "ALLOWED" not in log, log
+
+
 def test_tcl_reaches_the_robot_api_without_network(app):
     """Tcl has no Unix sockets, and network "none" leaves no TCP: its client relays."""
     source = 'package require robot\nputs "heading [dict get [robot::sensors] heading]"\n'
