@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test lint bench bench-deps fleet clean
+.PHONY: run test lint bench bench-deps fleet fleet-secrets clean
 
 $(BIN)/robotide: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -28,13 +28,19 @@ lint: $(BIN)/robotide
 bench: $(BIN)/robotide
 	$(BIN)/python -m benchmarks
 
-# What benchmarks/gateway.py compares the router with: socat (the raw byte forwarder) and
-# MAVProxy (a reference, in the venv only: not a test dependency).
-# The compose file's services as processes on this machine (its PostgreSQL and Redis).
+# The compose file's services as processes on this machine, on a PostgreSQL and a Redis of
+# their own with passwords (in var/fleet: FLEET_DATA), not the machine's servers.
 fleet: $(BIN)/robotide
 	./scripts/install-test-deps.sh
 	$(BIN)/python -m robotide.fleet
 
+# The passwords of docker compose's postgres and redis, generated once into .env (mode 0600);
+# kept if it is there. Needs python3 only, not the venv.
+fleet-secrets:
+	$(PYTHON) -m robotide.fleet secrets
+
+# What benchmarks/gateway.py compares the router with: socat (the raw byte forwarder) and
+# MAVProxy (a reference, in the venv only: not a test dependency).
 bench-deps: $(BIN)/robotide
 	command -v socat >/dev/null || { apt-get update && apt-get install -y socat; }
 	$(BIN)/pip install --quiet MAVProxy

@@ -1,6 +1,6 @@
-"""Fleet mode for real, on this machine's PostgreSQL and Redis: the compose file's services run
-by robotide.fleet (as `make fleet` does), with the web tier in 2 worker processes and 5 robots
-each added by its own block, each its own agent process.
+"""Fleet mode for real: the compose file's services run by robotide.fleet (as `make fleet`
+does), on its own PostgreSQL and Redis with their passwords, with the web tier in 2 worker
+processes and 5 robots each added by its own block, each its own agent process.
 
 Programs run on all 5 robots at once; a run's live log is watched through a worker other than
 the one that accepted it; an agent is killed (SIGKILL): its robot goes offline, its run is
@@ -19,16 +19,8 @@ import pytest
 import websockets
 import yaml
 
-from robotide.fleet import Fleet
-from tests.appliance import (
-    ADMIN_PASSWORD,
-    REDIS,
-    ROOT,
-    Appliance,
-    _redis_db,
-    cookie_header,
-    free_port,
-)
+from robotide.fleet import Fleet, PrivateServers, secrets
+from tests.appliance import ADMIN_PASSWORD, ROOT, Appliance, cookie_header, free_port
 from tests.appliance import wait_for as wait
 
 ROBOTS = [f"r{n}" for n in range(1, 6)]
@@ -53,29 +45,34 @@ def override(port: int) -> dict:
 
 
 @pytest.fixture(scope="module")
-def fleet(tmp_path_factory):
-    data = tmp_path_factory.mktemp("fleet")
+def fleet(fleet_data):
+    data = fleet_data
     port = free_port()
     extra = data / "lab.yml"
     extra.write_text(yaml.safe_dump(override(port)))
+    passwords = secrets(data / "secrets.env")
+    servers = PrivateServers(data, passwords)
     app = Appliance(data, mode="split")
-    app._create_database()
-    app.env["REDIS_URL"] = f"{REDIS}/{_redis_db()}"
     app.port, app.url = port, f"http://127.0.0.1:{port}"
     variables = {"ROBOTIDE_WEB_WORKERS": "2", "ROBOTIDE_ADMIN_PASSWORD": ADMIN_PASSWORD}
-    runner = Fleet(
-        [ROOT / "docker-compose.yml", extra], data=data, database=app.env["DATABASE_URL"],
-        redis=app.env["REDIS_URL"], host="127.0.0.1", variables=variables,
-        only=["web", *(f"agent-{r}" for r in ROBOTS)],
-    )  # fmt: skip
+    runner = None
     try:
+        servers.start()
+        app.env.update(DATABASE_URL=servers.database_url, REDIS_URL=servers.redis_url)
+        runner = Fleet(
+            [ROOT / "docker-compose.yml", extra], data=data, database=servers.database_url,
+            redis=servers.redis_url, host="127.0.0.1", variables={**variables, **passwords},
+            only=["web", *(f"agent-{r}" for r in ROBOTS)],
+        )  # fmt: skip
         runner.start(timeout=90)
         app.token = app.cli("token", "admin").strip()
         yield app, runner
     finally:
-        runner.stop()
+        if runner is not None:
+            runner.stop()
         print(app.logs()[-5000:])
-        app.stop()  # drops the database
+        app.stop()
+        servers.stop()
 
 
 def test_a_web_worker_that_dies_is_replaced(fleet):
