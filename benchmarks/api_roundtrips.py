@@ -1,8 +1,11 @@
 """Robot API round trips: how many bot.sensors() calls a program gets through per second.
 
-One Python program, run through the appliance like any user program, times 20,000
-`bot.sensors()` calls with the real client library (programs/clients/python/robot.py) and
-prints the rate and the per-call latency; the figures are read from the run's log.
+One Python program, run through the appliance like any user program (so in its box: the
+run's own namespaces, seccomp filter and account), times 20,000 `bot.sensors()` calls with the
+real client library (programs/clients/python/robot.py) and prints the rate and the per-call
+latency; the figures are read from the run's log. Twice: over the Robot API's Unix socket
+(ROBOT_API, bound into the box) and over its TCP side inside the run's network namespace
+(ROBOT_API_TCP, 127.0.0.1:7010, a socket the agent opened there and serves itself).
 
 Baselines, same run, same program file and client, launched from here with the launcher's
 environment against a Robot API server in a process of its own:
@@ -40,10 +43,13 @@ TARGET = 10_000
 RUN_TIMEOUT = 60.0
 TOKEN = "bench-token"
 PROGRAM = f"""\
+import os
+import sys
 import time
 import robot
 
-bot = robot.Robot()
+# argv[1] "tcp": the Robot API's TCP side in the run's own namespace; else its Unix socket
+bot = robot.Robot(os.environ["ROBOT_API_TCP"] if sys.argv[1:] == ["tcp"] else None)
 for _ in range(500):
     bot.sensors()
 N = {CALLS}
@@ -73,6 +79,14 @@ def parse(text: str) -> dict | None:
 
 
 def serve(mode: str, sample: str) -> None:
+    import os
+
+    import django
+
+    os.environ.setdefault("DJANGO_SETTINGS_MODULE", "robotide.settings")
+    os.environ.setdefault("ROBOTIDE_DATA", tempfile.mkdtemp(prefix="bench-api-data-"))
+    django.setup()  # robots.robot_api reaches robots.models
+
     import rhal
     from robots.robot_api import RobotApi
     from robots.rpc import RobotApiServer, RpcError
@@ -176,36 +190,48 @@ def measure(work: Path) -> list[Figure]:
     figures: list[Figure] = []
     file = work / "calls.py"
     file.write_text(PROGRAM)
+    through: dict[str, dict | None] = {}
     with appliance("api") as app:
         sample = json.dumps(app.api("GET", "/api/robots/sim/sensors").json())
         program = app.create_program("bench sensors calls", PROGRAM)
-        say(f"[{BENCH}] {CALLS:,} sensors() calls through the appliance")
-        run_id = app.run_program(program["id"])["id"]
-        ended = app.wait_run(run_id, timeout=RUN_TIMEOUT)
-        log = (app.data_dir / "runs" / str(run_id) / "output.log").read_text()
-        through = parse(log)
-        if through is None:
-            say(f"[{BENCH}] the run ended {ended['state']} ({ended['reason']}):\n{log[-2000:]}")
+        for transport in ("unix", "tcp"):
+            say(f"[{BENCH}] {CALLS:,} sensors() calls through the appliance ({transport})")
+            response = app.api(
+                "POST", f"/api/programs/{program['id']}/run", {"robot": "sim", "args": [transport]}
+            )
+            response.raise_for_status()
+            run_id = response.json()["id"]
+            ended = app.wait_run(run_id, timeout=RUN_TIMEOUT)
+            log = (app.data_dir / "runs" / str(run_id) / "output.log").read_text()
+            through[transport] = parse(log)
+            if through[transport] is None:
+                say(f"[{BENCH}] the run ended {ended['state']} ({ended['reason']}):\n{log[-2000:]}")
     say(f"[{BENCH}] baselines: canned echo, rpc only, RobotApi + sim")
     echo = baseline("echo", sample, file, work)
     rpc_only = baseline("rpc", sample, file, work)
     api_sim = baseline("api", sample, file, work)
 
-    rate = through and through["rate"]
-    figures.append(
-        Figure(
-            BENCH,
-            "sensors() round trips/s through the appliance",
-            rate,
-            "calls/s",
-            f">= {TARGET:,}",
-            rate is not None and rate >= TARGET,
-            f"payload {len(sample)} bytes of JSON",
+    for transport, label in (
+        ("unix", "sensors() round trips/s, boxed program, Unix socket"),
+        ("tcp", "sensors() round trips/s, boxed program, TCP 127.0.0.1:7010 in its namespace"),
+    ):
+        result = through[transport]
+        value = result and result["rate"]
+        figures.append(
+            Figure(
+                BENCH,
+                label,
+                value,
+                "calls/s",
+                f">= {TARGET:,}",
+                value is not None and value >= TARGET,
+                f"payload {len(sample)} bytes of JSON; {CALLS:,} calls",
+            )
         )
-    )
-    if through:
-        figures.append(Figure(BENCH, "  latency per call, median", through["p50"] * 1e6, "us"))
-        figures.append(Figure(BENCH, "  latency per call, p99", through["p99"] * 1e6, "us"))
+        if result:
+            figures.append(Figure(BENCH, "  latency per call, median", result["p50"] * 1e6, "us"))
+            figures.append(Figure(BENCH, "  latency per call, p99", result["p99"] * 1e6, "us"))
+    rate = through["unix"] and through["unix"]["rate"]
     for label, result in (
         ("baseline: canned reply per line, asyncio Protocol, no JSON-RPC", echo),
         ("baseline: rpc server only, fixed reply", rpc_only),
@@ -214,7 +240,7 @@ def measure(work: Path) -> list[Figure]:
         value = result and result["rate"]
         figures.append(Figure(BENCH, label, value, "calls/s", note=latency_note(result)))
         if value and rate:
-            figures.append(Figure(BENCH, "  appliance / this baseline", rate / value, "x"))
+            figures.append(Figure(BENCH, "  appliance (Unix) / this baseline", rate / value, "x"))
     return figures
 
 

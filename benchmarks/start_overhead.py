@@ -7,8 +7,14 @@ for "request -> first line in the log file".
 
 Baseline, measured in the same run and interleaved with it: the same interpreter running the
 same program file from this process (spawn -> first line read on a pipe), and the launcher's
-own command line as the agent builds it (bubblewrap sandbox where installed, setpriv into the
-run's own account, prlimit, interpreter).
+chain as the agent builds it, run by benchmarks/boxstart.py (a driver in a process of its own,
+no web tier): a runbox Box (bubblewrap, --info-fd/--block-fd, seccomp, the run's tmpfs folder,
+the Robot API's tcp:7010 listener opened in the run's network namespace), setpriv into the
+run's account, prlimit, interpreter, spawned as the supervisor does and box.open() awaited;
+with the chain's parts added one by one (bwrap alone, + setpriv, + prlimit, + the box's
+open()) and open()'s steps timed. Where the account `nobody` can make user namespaces, a
+second driver runs as nobody with the system's python3: the rootless chain (unshare +
+runbox.inbox).
 
 The programs print the time at their first statement (Python's time.time(), bash's
 $EPOCHREALTIME), which splits the latency into launch (request -> program running), capture
@@ -17,8 +23,11 @@ $EPOCHREALTIME), which splits the latency into launch (request -> program runnin
 Target: request -> first line on the websocket within 1.2 x the bare start + 15 ms.
 """
 
+import json
 import os
+import pwd
 import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -38,9 +47,9 @@ from benchmarks.common import (
     session_cookie,
     ws_connect,
 )
-from programs.languages import CLIENTS_DIR, get_language
+from programs.languages import get_language
 from runbox import launcher
-from runbox.isolation import Policy, prepare_workdir
+from runbox.isolation import InForce
 
 BENCH = "1 start overhead"
 RUNS = 20
@@ -51,6 +60,10 @@ SOURCES = {
     "python": "import time; print(time.time())\n",
     "shell": "echo $EPOCHREALTIME\n",
 }
+DRIVER = Path(__file__).resolve().parent / "boxstart.py"
+# The launcher chain's parts, added one by one (root), and the whole chain (root, rootless).
+STAGES = ("bare", "bwrap", "bwrap+setpriv", "bwrap+setpriv+prlimit", "box")
+STAGES_ROOTLESS = ("bare", "box")
 
 
 class LogWatcher(threading.Thread):
@@ -103,7 +116,7 @@ def program_time(text: str) -> float | None:
 
 def appliance_run(app, http, cookie: str, program_id: int, known: set[str]) -> dict:
     runs = runs_dir(app)
-    watcher = LogWatcher(runs, known)
+    watcher = LogWatcher(runs, set(known))  # a copy: the new run goes into `known` below
     watcher.start()
     wall0, t0 = time.time(), time.perf_counter()
     response = http.post(f"/api/programs/{program_id}/run", json={"robot": "sim"})
@@ -192,6 +205,53 @@ def probe_connect(app, http, cookie: str, run_id: int) -> dict:
     return {"get": t1 - t0, "open": t2 - t1, "first": t3 - t1}
 
 
+class BoxDriver:
+    """benchmarks/boxstart.py in a process of its own: one boxed start per request."""
+
+    def __init__(self, argv: list[str]):
+        self.proc = subprocess.Popen(
+            argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd="/"
+        )
+        ready = self.proc.stdout.readline()
+        if not ready:
+            self.close()
+            raise RuntimeError(f"{' '.join(argv)}: the driver did not start")
+        self.rootless = json.loads(ready)["rootless"]
+
+    def start(self, request: dict) -> dict:
+        self.proc.stdin.write(json.dumps(request) + "\n")
+        self.proc.stdin.flush()
+        answer = json.loads(self.proc.stdout.readline() or '{"error": "driver ended"}')
+        if "error" in answer:
+            raise RuntimeError(f"boxed start ({request['stage']}): {answer['error']}")
+        return answer
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+
+
+def rootless_driver() -> tuple[BoxDriver | None, str]:
+    """The driver as the account nobody (the system's python3), or why there is none."""
+    if os.geteuid() != 0:
+        return None, "this benchmark is not root: its own driver is the rootless one"
+    try:
+        nobody = pwd.getpwnam("nobody")
+    except KeyError:
+        return None, "no account nobody"
+    argv = [
+        "setpriv", f"--reuid={nobody.pw_uid}", f"--regid={nobody.pw_gid}", "--clear-groups",
+        "/usr/bin/python3", "-I", str(DRIVER),
+    ]  # fmt: skip
+    try:
+        return BoxDriver(argv), ""
+    except (OSError, RuntimeError, ValueError) as exc:
+        return None, f"no rootless driver: {exc}"
+
+
 def stats(rows: list[dict], key: str) -> tuple[float, float, int]:
     values = [r[key] for r in rows if r.get(key) is not None]
     return median(values), percentile(values, 90), len(values)
@@ -203,64 +263,94 @@ def run() -> list[Figure]:
 
 
 def measure(work: Path) -> list[Figure]:
-    figures: list[Figure] = []
     languages = {name: get_language(name) for name in SOURCES}
     bare_cmds: dict[str, tuple[list[str], dict]] = {}
-    # The launcher's chain as the agent builds it by default: the run's own account, and the
-    # bubblewrap sandbox where it is installed.
-    in_force = Policy().resolve(CLIENTS_DIR)
-    uid = in_force.uid(0, str(work))
-    sockets = work / "sockets"
-    sockets.mkdir()
+    box_requests: dict[str, dict] = {}
     for name, language in languages.items():
         file = work / f"prog{language.extension}"
         file.write_text(SOURCES[name])
         env = launcher.environment(language, work, {})
         bare_cmds[f"bare {name}"] = (language.command(str(file)), env)
-        limits = launcher.Limits()
-        home = work / f"run-{name}" / "work"
-        home.mkdir(parents=True)
-        (home / file.name).write_text(SOURCES[name])
-        prepare_workdir(home, uid)
-        cmd = launcher.command(
-            language, home / file.name, limits, isolation=in_force, uid=uid, socket_dir=sockets
-        )
-        isolated_env = launcher.environment(
-            language, in_force.home(home), {}, clients_dir=in_force.clients()
-        )
-        bare_cmds[f"launcher {name}"] = (cmd, isolated_env)
+        # What the agent gives a boxed run (robots/agent.py _launch), less the Robot API's
+        # variables (the program does not call it).
+        box_requests[name] = {
+            "command": language.command("FILE")[:-1],
+            "source": SOURCES[name],
+            "filename": f"main{language.extension}",
+            "env": launcher.environment(language, InForce.HOME, {}, clients_dir=InForce.CLIENTS),
+        }
     python = languages["python"].interpreter_path()
     bare_cmds["python3 -u -c print(1)"] = ([python, "-u", "-c", "print(1)"], {"PATH": "/usr/bin"})
     bare_cmds["sh -c 'echo 1'"] = (["/bin/sh", "-c", "echo 1"], {"PATH": "/usr/bin"})
 
     bare: dict[str, list[dict]] = {k: [] for k in bare_cmds}
     app_rows: dict[str, list[dict]] = {name: [] for name in SOURCES}
-    with appliance("start") as app:
-        http = api_client(app)
-        cookie = session_cookie(app)
-        programs = {
-            name: app.create_program(f"bench start {name}", source, language=name)["id"]
-            for name, source in SOURCES.items()
-        }
-        known: set[str] = set()
-        say(
-            f"[{BENCH}] {WARMUP} warm-up + {RUNS} measured runs per language, interleaved"
-            " with the bare baselines"
+    # (driver, language, stage) -> rows
+    boxed: dict[tuple[str, str, str], list[dict]] = {}
+    drivers = {"root": BoxDriver([sys.executable, str(DRIVER)])}
+    rootless, why_not = rootless_driver()
+    if rootless is not None:
+        drivers["rootless"] = rootless
+    try:
+        with appliance("start") as app:
+            http = api_client(app)
+            cookie = session_cookie(app)
+            programs = {
+                name: app.create_program(f"bench start {name}", source, language=name)["id"]
+                for name, source in SOURCES.items()
+            }
+            known: set[str] = set()
+            say(
+                f"[{BENCH}] {WARMUP} warm-up + {RUNS} measured runs per language, interleaved"
+                f" with the bare baselines and the launcher chain ({', '.join(drivers)})"
+            )
+            for i in range(WARMUP + RUNS):
+                for key, (argv, env) in bare_cmds.items():
+                    row = bare_run(argv, env, str(work))
+                    if i >= WARMUP:
+                        bare[key].append(row)
+                for who, driver in drivers.items():
+                    stages = STAGES_ROOTLESS if driver.rootless else STAGES
+                    for name, request in box_requests.items():
+                        for stage in stages:
+                            row = driver.start({**request, "stage": stage})
+                            if i >= WARMUP:
+                                boxed.setdefault((who, name, stage), []).append(row)
+                for name, program_id in programs.items():
+                    row = appliance_run(app, http, cookie, program_id, known)
+                    if i >= WARMUP:
+                        app_rows[name].append(row)
+                    time.sleep(0.02)
+            last = max(int(k) for k in known)
+            probes = [probe_connect(app, http, cookie, last) for _ in range(10)]
+            http.close()
+    finally:
+        for driver in drivers.values():
+            driver.close()
+    figures = appliance_figures(bare_cmds, bare, app_rows, boxed)
+    figures += chain_figures(boxed, drivers, why_not)
+    for key in ("python3 -u -c print(1)", "sh -c 'echo 1'"):
+        figures.append(
+            Figure(
+                BENCH, f"bare {key} -> first line, median", stats(bare[key], "first")[0] * MS, "ms"
+            )
         )
-        for i in range(WARMUP + RUNS):
-            for key, (argv, env) in bare_cmds.items():
-                row = bare_run(argv, env, str(work))
-                if i >= WARMUP:
-                    bare[key].append(row)
-            for name, program_id in programs.items():
-                row = appliance_run(app, http, cookie, program_id, known)
-                if i >= WARMUP:
-                    app_rows[name].append(row)
-                time.sleep(0.02)
-        last = max(int(k) for k in known)
-        probes = [probe_connect(app, http, cookie, last) for _ in range(10)]
-        http.close()
+    for label, key in [
+        ("API GET /api/runs/{id} round trip", "get"),
+        ("websocket open, existing run", "open"),
+        ("websocket connect -> first message (log tail), existing run", "first"),
+    ]:
+        figures.append(Figure(BENCH, f"{label}, median", stats(probes, key)[0] * MS, "ms"))
+    return figures
 
+
+def med_p90(rows: list[dict], key: str) -> str:
+    med, p90, n = stats(rows, key)
+    return f"median {med * MS:.2f} ms, p90 {p90 * MS:.2f} ms, n={n}"
+
+
+def appliance_figures(bare_cmds, bare, app_rows, boxed) -> list[Figure]:
+    figures = []
     for name in SOURCES:
         rows = app_rows[name]
         tail = sum(1 for r in rows if r["in_tail"])
@@ -269,7 +359,7 @@ def measure(work: Path) -> list[Figure]:
         note = f"the first line came in the initial log tail in {tail} of {len(rows)} runs"
         if bad:
             note += f"; runs not finished {END_TIMEOUT:g} s after their output, by state: {bad}"
-        b_med, b_p90, _ = stats(bare[f"bare {name}"], "first")
+        b_med, b_p90, b_n = stats(bare[f"bare {name}"], "first")
         for label, (value, base) in {
             "median": (stats(rows, "ws")[0], b_med),
             "p90": (stats(rows, "ws")[1], b_p90),
@@ -283,7 +373,7 @@ def measure(work: Path) -> list[Figure]:
                     "ms",
                     f"<= {bound * MS:.1f} ms (1.2 x {base * MS:.1f} + 15)",
                     value <= bound,
-                    note if label == "median" else "",
+                    f"n={stats(rows, 'ws')[2]}; " + note if label == "median" else "",
                 )
             )
         f_med, f_p90, _ = stats(rows, "file")
@@ -299,16 +389,20 @@ def measure(work: Path) -> list[Figure]:
                 f"{name}: bare start (same file) -> first line, median",
                 b_med * MS,
                 "ms",
-                note=" ".join(bare_cmds[f"bare {name}"][0][:-1]) + " FILE, from this process",
+                note=" ".join(bare_cmds[f"bare {name}"][0][:-1])
+                + f" FILE, from this process, n={b_n}",
             )
         )
         figures.append(Figure(BENCH, f"{name}: bare start, p90", b_p90 * MS, "ms"))
+        chain = boxed.get(("root", name, "box"), [])
         figures.append(
             Figure(
                 BENCH,
-                f"{name}: launcher chain (sandbox+account+limits), median",
-                stats(bare[f"launcher {name}"], "first")[0] * MS,
+                f"{name}: launcher chain (box+account+limits, root), median",
+                stats(chain, "first")[0] * MS,
                 "ms",
+                note="benchmarks/boxstart.py: spawn -> first line, box.open() included; "
+                + med_p90(chain, "first"),
             )
         )
         # Where the time goes (medians), from the program's own clock at its first statement.
@@ -332,18 +426,69 @@ def measure(work: Path) -> list[Figure]:
                 "ms",
             )
         )
-    for key in ("python3 -u -c print(1)", "sh -c 'echo 1'"):
-        figures.append(
-            Figure(
-                BENCH, f"bare {key} -> first line, median", stats(bare[key], "first")[0] * MS, "ms"
+    return figures
+
+
+def chain_figures(boxed, drivers, why_not: str) -> list[Figure]:
+    """The launcher chain, part by part, from the drivers (no web tier)."""
+    figures = []
+    for who, driver in drivers.items():
+        stages = STAGES_ROOTLESS if driver.rootless else STAGES
+        account = "as nobody, rootless" if driver.rootless else "as root"
+        for name in SOURCES:
+            base = stats(boxed[(who, name, "bare")], "first")[0]
+            for stage in stages:
+                rows = boxed[(who, name, stage)]
+                med = stats(rows, "first")[0]
+                label = {"bare": "bare interpreter (driver's spawn)", "box": "whole chain"}.get(
+                    stage, stage
+                )
+                note = med_p90(rows, "first")
+                if stage != "bare":
+                    note += f"; +{(med - base) * MS:.2f} ms over the bare interpreter"
+                figures.append(
+                    Figure(
+                        BENCH,
+                        f"chain {account}, {name}: {label}, median",
+                        med * MS,
+                        "ms",
+                        note=note,
+                    )
+                )
+            rows = boxed[(who, name, "box")]
+            for key, label in (
+                ("prepare", "make_box + seccomp fd + launcher.command"),
+                ("spawn", "subprocess_exec returns"),
+                ("open", "box.open() in all"),
+            ):
+                figures.append(
+                    Figure(
+                        BENCH,
+                        f"chain {account}, {name}:   {label}, median",
+                        stats(rows, key)[0] * MS,
+                        "ms",
+                    )  # fmt: skip
+                )
+            steps = [{k: v for k, v in r["steps"].items()} for r in rows]
+            for step in steps[0] if steps else ():
+                figures.append(
+                    Figure(
+                        BENCH,
+                        f"chain {account}, {name}:     open(): {step}, median",
+                        stats(steps, step)[0] * MS,
+                        "ms",
+                    )
+                )
+            figures.append(
+                Figure(
+                    BENCH,
+                    f"chain {account}, {name}:   box.close() after the exit, median",
+                    stats(rows, "close")[0] * MS,
+                    "ms",
+                )
             )
-        )
-    for label, key in [
-        ("API GET /api/runs/{id} round trip", "get"),
-        ("websocket open, existing run", "open"),
-        ("websocket connect -> first message (log tail), existing run", "first"),
-    ]:
-        figures.append(Figure(BENCH, f"{label}, median", stats(probes, key)[0] * MS, "ms"))
+    if why_not:
+        figures.append(Figure(BENCH, "chain as nobody, rootless", None, "", note=why_not))
     return figures
 
 
