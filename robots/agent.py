@@ -31,7 +31,7 @@ from django.utils import timezone
 import rhal
 from programs.languages import CLIENTS_DIR, LanguageUnavailable, get_language
 from programs.models import Run
-from robots import rpc
+from robots import messages, rpc
 from robots.bridges import Bridges
 from robots.bus import MANAGER_CHANNEL, RUNS_GROUP, run_group
 from robots.camera import CameraHub
@@ -275,6 +275,13 @@ class RobotAgent:
                 await self.reply(message, {"error": f"agent failed on {message.get('type')}"})
 
     async def dispatch(self, message: dict) -> None:
+        if (why := messages.check(message)) is not None:  # fleet mode: Redis is open to others
+            messages.log_refused(self.name, why)
+            if reply_to := messages.reply_channel(message):
+                with contextlib.suppress(Exception):
+                    refused = {"type": "agent.reply", "error": f"message refused: {why}"}
+                    await self.layer.send(reply_to, refused)
+            return
         kind = message.get("type")
         if kind == "run.start":
             # In a task: a stop or an emergency stop must not wait behind a program's start.
@@ -352,6 +359,8 @@ class RobotAgent:
         self._run_changed(run_id)
 
     async def _launch(self, run_id: int, message: dict) -> ActiveRun:
+        if (why := messages.check_filename(message["filename"])) is not None:
+            raise ValueError(why)
         if self.isolation is None:
             raise IsolationUnavailable(self.isolation_error)
         language = get_language(message["language"])

@@ -10,9 +10,13 @@ library speaks (Tcl has no Unix sockets).
 import asyncio
 import json
 import logging
+import re
 import socket
+import time
+import traceback
 from collections import deque
 from collections.abc import Awaitable, Callable
+from itertools import accumulate
 from typing import Any
 
 log = logging.getLogger(__name__)
@@ -24,8 +28,11 @@ INVALID_PARAMS = -32602
 INTERNAL_ERROR = -32603
 ROBOT_ERROR = -32000
 UNAUTHORIZED = -32001
+LIMIT_REACHED = -32002  # a cap on what one run may make the robot hold (robots.robot_api)
 
 MAX_REQUEST_BYTES = 1024 * 1024
+MAX_DEPTH = 64  # arrays and objects nested in a request, the batch's own array included
+MAX_BATCH = 1000  # requests in one batch
 # One encoder for every reply: json.dumps() with options builds a new one each call.
 _encode = json.JSONEncoder(separators=(",", ":"), check_circular=False).encode
 
@@ -45,12 +52,13 @@ class RpcError(Exception):
 class Session:
     """One client connection; `run` is set once it has authenticated."""
 
-    __slots__ = ("run", "peer", "subscriptions")
+    __slots__ = ("run", "peer", "subscriptions", "queued")
 
     def __init__(self, peer):
         self.run = None
         self.peer = peer
-        self.subscriptions: dict = {}  # topic -> queue of the values published to it
+        self.subscriptions: dict = {}  # topic -> its subscription (robots.robot_api)
+        self.queued = 0  # bytes of the values waiting in its subscriptions
 
 
 # handler(session, method, params) -> result; raises RpcError for a clean error reply
@@ -121,13 +129,28 @@ class RobotApiServer:
             await server.wait_closed()
 
     async def handle_line(self, session: Session, line: bytes):
+        """The reply to one line (None for notifications only); never raises."""
+        try:
+            return await self._handle_line(session, line)
+        except Exception as exc:  # a bug here must cost one request, not the connection
+            _log_unexpected("Robot API request", exc)
+            return _error(None, INTERNAL_ERROR, "internal error")
+
+    async def _handle_line(self, session: Session, line: bytes):
+        # A line shorter than the limit cannot be nested deeper: most requests skip the scan.
+        if len(line) > MAX_DEPTH and too_deep(line):
+            return _error(None, PARSE_ERROR, f"parse error: nested deeper than {MAX_DEPTH} levels")
         try:
             message = json.loads(line)
         except (ValueError, UnicodeDecodeError) as exc:
             return _error(None, PARSE_ERROR, f"parse error: {exc}")
+        except RecursionError:  # too_deep() is exact for JSON; this is a second line of defence
+            return _error(None, PARSE_ERROR, f"parse error: nested deeper than {MAX_DEPTH} levels")
         if isinstance(message, list):
             if not message:
                 return _error(None, INVALID_REQUEST, "empty batch")
+            if len(message) > MAX_BATCH:
+                return _error(None, INVALID_REQUEST, f"batch of more than {MAX_BATCH} requests")
             replies = [await self.handle_request(session, m) for m in message]
             return [r for r in replies if r is not None] or None
         return await self.handle_request(session, message)
@@ -146,9 +169,9 @@ class RobotApiServer:
             result = await self.handler(session, method, params)
         except RpcError as exc:
             reply = {"jsonrpc": "2.0", "id": req_id, "error": exc.as_json()}
-        except Exception:
-            log.exception("Robot API method %s failed", method)
-            reply = _error(req_id, INTERNAL_ERROR, f"internal error in {method}")
+        except Exception as exc:
+            _log_unexpected(f"Robot API method {method[:64]!r}", exc)
+            reply = _error(req_id, INTERNAL_ERROR, f"internal error in {method[:64]}")
         else:
             reply = {"jsonrpc": "2.0", "id": req_id, "result": result}
         return None if "id" not in request else reply
@@ -168,6 +191,8 @@ class _Connection(asyncio.Protocol):
         self.buffer = b""
         self.backlog: deque[bytes] = deque()
         self.busy = False
+        self.write_paused = False
+        self.read_paused = False
 
     def connection_made(self, transport) -> None:
         self.transport = transport
@@ -181,13 +206,29 @@ class _Connection(asyncio.Protocol):
         self.server._connections.discard(self)
         self.backlog.clear()
         if self.server.closed is not None:
-            self.server.closed(self.session)
+            try:
+                self.server.closed(self.session)
+            except Exception as error:
+                _log_unexpected("Robot API connection close", error)
 
     def pause_writing(self) -> None:  # a client that does not read its replies: stop reading
-        self.transport.pause_reading()
+        self.write_paused = True
+        self.flow()
 
     def resume_writing(self) -> None:
-        self.transport.resume_reading()
+        self.write_paused = False
+        self.flow()
+
+    def flow(self) -> None:
+        """Read on only while replies go out and no request waits behind a slow one: what a
+        client sends ahead waits in the kernel's socket buffer, not in ours."""
+        pause = self.write_paused or bool(self.backlog)
+        if pause != self.read_paused and not self.transport.is_closing():
+            self.read_paused = pause
+            if pause:
+                self.transport.pause_reading()
+            else:
+                self.transport.resume_reading()
 
     def data_received(self, data: bytes) -> None:
         *lines, self.buffer = (self.buffer + data).split(b"\n")
@@ -197,6 +238,8 @@ class _Connection(asyncio.Protocol):
             return
         self.backlog.extend(line for line in lines if line.strip())
         self.answer_backlog()
+        if self.backlog or self.read_paused:
+            self.flow()
 
     def answer(self, line: bytes):
         if len(line) > MAX_REQUEST_BYTES:
@@ -223,12 +266,27 @@ class _Connection(asyncio.Protocol):
     def finished(self, task: asyncio.Task) -> None:
         self.busy = False
         if not task.cancelled():
-            self.send(task.result())
+            exc = task.exception()  # handle_line never raises; _finish might, if asyncio did
+            if exc is None:
+                self.send(task.result())
+            else:
+                _log_unexpected("Robot API request", exc)
+                self.send(_error(None, INTERNAL_ERROR, "internal error"))
         self.answer_backlog()
+        if self.backlog or self.read_paused:
+            self.flow()
 
     def send(self, reply) -> None:
-        if reply is not None and not self.transport.is_closing():
-            self.transport.write(_encode(reply).encode() + b"\n")
+        if reply is None or self.transport.is_closing():
+            return
+        try:
+            data = _encode(reply).encode()
+        except Exception as exc:  # a handler's result that is not JSON: a bug, told as one
+            _log_unexpected("Robot API reply", exc)
+            req_id = reply.get("id") if isinstance(reply, dict) else None
+            data = _encode(_error(req_id, INTERNAL_ERROR, "internal error: a reply not JSON"))
+            data = data.encode()
+        self.transport.write(data + b"\n")
 
 
 async def _done(value):
@@ -254,6 +312,66 @@ async def _finish(coro, waiting_on):
 
 def _error(req_id, code: int, message: str) -> dict:
     return {"jsonrpc": "2.0", "id": req_id, "error": {"code": code, "message": message}}
+
+
+# -- how deep a request nests, found without parsing it ---------------------------------------
+
+# A JSON string, escapes and all (the brackets inside one do not nest anything).
+_STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.DOTALL)
+_NOT_BRACKETS = bytes(b for b in range(256) if b not in b"[]{}")
+# Openers -> 1, closers -> -1 (as a signed byte), for a running sum that is the depth.
+_SIGNED = bytes.maketrans(b"[{]}", b"\x01\x01\xff\xff")
+_TOO_DEEP_RUN = b"\x01" * (MAX_DEPTH + 1)
+
+
+def too_deep(line: bytes) -> bool:
+    """Whether the JSON text nests arrays and objects deeper than MAX_DEPTH.
+
+    C-speed steps only (count, a regular expression, translate, a running sum), so a
+    megabyte line costs milliseconds, however it nests; json.loads would recurse instead.
+    """
+    if line.count(b"[") + line.count(b"{") <= MAX_DEPTH:  # the usual case: done
+        return False
+    brackets = _STRING.sub(b"", line).translate(None, _NOT_BRACKETS)
+    if len(brackets) <= MAX_DEPTH:
+        return False
+    signed = brackets.translate(_SIGNED)
+    if _TOO_DEEP_RUN in signed:  # "[[[[..." : found without summing
+        return True
+    return max(accumulate(memoryview(signed).cast("b"))) > MAX_DEPTH
+
+
+# -- unexpected errors: said, but never a flood of tracebacks ---------------------------------
+
+LOG_BURST = 10  # unexpected errors logged per LOG_PERIOD; the others are counted
+LOG_PERIOD = 60.0
+_log_window = [0.0, 0, 0]  # when the window began, lines logged in it, lines suppressed
+_tracebacks_seen: set[tuple] = set()  # (exception type, where): its traceback logged once
+
+
+def _log_unexpected(what: str, exc: BaseException) -> None:
+    """One log line per unexpected error, at most LOG_BURST a minute; the first error of each
+    kind and place gets its traceback (once), the rest one line each."""
+    now = time.monotonic()
+    if now - _log_window[0] >= LOG_PERIOD:
+        _log_window[0], _log_window[1] = now, 0
+    if _log_window[1] >= LOG_BURST:
+        _log_window[2] += 1
+        return
+    _log_window[1] += 1
+    suppressed, _log_window[2] = _log_window[2], 0
+    more = f" ({suppressed} more not logged)" if suppressed else ""
+    frames = traceback.extract_tb(exc.__traceback__)
+    where = f"{frames[-1].filename}:{frames[-1].lineno}" if frames else "?"
+    key = (type(exc), where)
+    first = key not in _tracebacks_seen and len(_tracebacks_seen) < 100
+    if first:
+        _tracebacks_seen.add(key)
+    log.error(
+        "%s failed: %s: %s (at %s)%s",
+        what, type(exc).__name__, str(exc)[:200], where, more,
+        exc_info=exc if first else None,
+    )  # fmt: skip
 
 
 def bind_params(params, names: tuple[str, ...], required: int) -> list:
