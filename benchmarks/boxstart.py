@@ -28,6 +28,7 @@ RunProcess's options (new session, umask 022, pass_fds, clean env, pipes).
 import asyncio
 import json
 import os
+import shutil
 import sys
 import tempfile
 import time
@@ -223,12 +224,15 @@ async def main() -> None:
     driver = Driver()
     loop = asyncio.get_running_loop()
     print(json.dumps({"ready": True, "rootless": driver.in_force.rootless}), flush=True)
-    while line := await loop.run_in_executor(None, sys.stdin.readline):
-        try:
-            answer = await driver.start(json.loads(line))
-        except Exception as exc:
-            answer = {"error": repr(exc)}
-        print(json.dumps(answer), flush=True)
+    try:
+        while line := await loop.run_in_executor(None, sys.stdin.readline):
+            try:
+                answer = await driver.start(json.loads(line))
+            except Exception as exc:
+                answer = {"error": repr(exc)}
+            print(json.dumps(answer), flush=True)
+    finally:
+        shutil.rmtree(driver.work, ignore_errors=True)
 
 
 if __name__ == "__main__":
