@@ -12,6 +12,7 @@ have prlimit || need="$need util-linux"
 have bwrap || need="$need bubblewrap"
 have slirp4netns || need="$need slirp4netns"
 [ -x /usr/bin/python3 ] || need="$need python3"
+/usr/bin/python3 -c "import ensurepip" 2>/dev/null || need="$need python3-venv"  # make run's .venv
 # The languages programs are written in (programs/languages.py) and what their clients use.
 have perl || need="$need perl"
 have ruby || need="$need ruby"
