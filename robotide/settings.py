@@ -277,6 +277,7 @@ RUN_DEFAULTS = {
     "file_size_mb": env_int("ROBOTIDE_RUN_FILE_SIZE_MB", 64),
     "disk_mb": env_int("ROBOTIDE_RUN_DISK_MB", 256),
     "log_size_mb": env_int("ROBOTIDE_RUN_LOG_SIZE_MB", 64),
+    "cpu_percent": env_int("ROBOTIDE_RUN_CPU_PERCENT", 100),  # of one CPU, the run as a whole
     "stop_grace_seconds": 3,
 }
 # -- A shared robot's run queue (robots.run_queue): while others wait, the program holding the

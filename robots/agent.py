@@ -17,6 +17,7 @@ import secrets
 import shutil
 import socket
 import tempfile
+import zlib
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from functools import partial
@@ -40,7 +41,7 @@ from robots.lease import ControlLease, Holder, LeaseHeld
 from robots.models import Robot, agent_channel, robot_group
 from robots.robot_api import RobotApi
 from robots.run_queue import RunQueue
-from runbox import launcher, seccomp
+from runbox import cgroups, launcher, seccomp
 from runbox.box import Listener, make_box
 from runbox.isolation import InForce, IsolationUnavailable, Policy, run_uid
 from runbox.relays import relay_to_host
@@ -49,6 +50,7 @@ from runbox.watch import RunWatch, signal_account
 
 log = logging.getLogger(__name__)
 
+MB = 1024 * 1024
 # Inside a run's own network namespace the Robot API's TCP side is always here.
 ROBOT_API_PORT = 7010
 TELEMETRY_INTERVAL = 0.25
@@ -84,6 +86,9 @@ class RobotAgent:
         self.cancelled: set[int] = set()  # stopped before their start was handled
         self._shows_snapshot_due = True
         self.layer = get_channel_layer()
+        # This robotide's (its data folder's) runs of this robot, among all on the machine.
+        instance = zlib.crc32(str(settings.DATA_DIR).encode())
+        self.cgroup_prefix = f"{instance:08x}-{name}-"
         self.driver: rhal.Robot | None = None
         self.link_error: str | None = None
         self.api = RobotApi(self)
@@ -132,6 +137,8 @@ class RobotAgent:
         for run_id in lost:
             end_leftovers(run_id)
             self.publish(run_group(run_id), {"type": "run.state", "run_id": run_id})
+        if self.cgroups.available:  # runs of a dead agent, lost or not, end with their cgroups
+            await asyncio.to_thread(cgroups.sweep, self.cgroups, self.cgroup_prefix)
         await self.bridges.reload()
         self.api_address = await self.server.start()
         # Run accounts reach the socket; the token, not the file mode, decides who is served.
@@ -153,8 +160,11 @@ class RobotAgent:
         robot = await database_sync_to_async(Robot.objects.get)(name=self.name)
         self.limits = robot.run_limits(settings.RUN_DEFAULTS)
         self.isolation, self.isolation_error = resolve_isolation(robot)
+        self.cgroups = await asyncio.to_thread(cgroups.detect)
         await database_sync_to_async(Robot.objects.filter(name=self.name).update)(
-            isolation=self.isolation.describe() if self.isolation else self.isolation_error
+            isolation=self.isolation.describe(self.cgroups.describe())
+            if self.isolation
+            else self.isolation_error
         )
         return robot
 
@@ -370,6 +380,7 @@ class RobotAgent:
         limits = launcher.Limits.from_settings(self.limits)
         token = secrets.token_urlsafe(24)
         program_env = self.gateway.program_env()
+        cgroup = self._cgroup(run_id, limits)
         box = make_box(
             self.isolation,
             socket_dir=self.socket_dir,
@@ -378,6 +389,8 @@ class RobotAgent:
             disk_mb=limits.disk_mb,
             listeners=self._listeners(program_env),
             seccomp_fd=seccomp.open_filter_fd(),
+            cgroup=cgroup,
+            rlimits=limits.rlimits(address_space=cgroup is None),
         )
         extra = {
             "ROBOT_API": f"unix:{self.isolation.api_dir() / self.server.unix_path.name}",
@@ -419,6 +432,20 @@ class RobotAgent:
             raise
         active.watcher = asyncio.create_task(self._watch(active))
         return active
+
+    def _cgroup(self, run_id: int, limits: launcher.Limits) -> cgroups.RunCgroup | None:
+        """The run's cgroup, where this machine gives one (else rlimits alone, as shown on the
+        robot's page); one that cannot be made refuses the run."""
+        if not self.cgroups.available:
+            return None
+        try:
+            return cgroups.RunCgroup.create(
+                f"{self.cgroup_prefix}run-{run_id}", self.cgroups,
+                memory_bytes=limits.memory_mb * MB, pids=limits.processes,
+                cpu_percent=limits.cpu_percent, cpu_seconds=limits.cpu_seconds,
+            )  # fmt: skip
+        except (cgroups.CgroupError, OSError) as exc:
+            raise IsolationUnavailable(f"its cgroup could not be made: {exc}") from None
 
     def _listeners(self, program_env: dict) -> list[Listener]:
         """What the run's robot gives programs on 127.0.0.1 inside the run's namespace."""

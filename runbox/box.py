@@ -15,6 +15,7 @@ import inspect
 import json
 import logging
 import os
+import resource
 import signal
 import socket
 import sys
@@ -61,8 +62,13 @@ class Box:
         listeners: list[Listener] = (),
         cgroup=None,
         seccomp_fd: int | None = None,
+        rlimits: dict[int, tuple[int, int]] | None = None,
     ):
+        """`rlimits`: each of the run's processes' own limits (resource.RLIMIT_*), set on the
+        box's first process before the program starts; `cgroup`: a runbox.cgroups.RunCgroup
+        that the box's first process joins then."""
         self.in_force, self.listeners, self.cgroup = in_force, list(listeners), cgroup
+        self.rlimits = rlimits or {}
         self.filename = filename
         self.program_fd = os.memfd_create("program", 0)
         os.write(self.program_fd, source)
@@ -177,6 +183,8 @@ class BwrapBox(Box):
         self._close(*self.pass_fds())  # the sandbox has them now
         info = await self._read_info()
         self.init_pid, self.pidns = info["child-pid"], info["pid-namespace"]
+        for limit, values in self.rlimits.items():
+            resource.prlimit(self.init_pid, limit, values)
         if self.cgroup is not None:
             self.cgroup.add(self.init_pid)
         if self.in_force.network != "none":
@@ -265,6 +273,7 @@ class RootlessBox(Box):
         spec = {
             **self.spec, "program_fd": self.program_fd, "seccomp_fd": self.seccomp_fd,
             "services": [listener.service for listener in self.listeners],
+            "rlimits": [[limit, *values] for limit, values in self.rlimits.items()],
         }  # fmt: skip
         self._close(*self.pass_fds())
         try:

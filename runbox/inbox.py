@@ -18,6 +18,7 @@ there, and nowhere else), mount, pid, network, ipc and uts namespaces. It then
 import ctypes
 import json
 import os
+import resource
 import signal
 import socket
 import sys
@@ -189,6 +190,7 @@ def main() -> int:
     program = read_fd(spec["program_fd"])
     seccomp = read_fd(spec["seccomp_fd"]) if spec.get("seccomp_fd") is not None else b""
     build_root(spec, program)
+    socket.sethostname("robot")  # its own uts namespace: the host's name is not its business
     sockets = bind_services(spec["services"])
     fds = [s.fileno() for s in sockets]
     control.sendmsg([b"ready\n"], [(socket.SOL_SOCKET, socket.SCM_RIGHTS, bytes(
@@ -205,6 +207,8 @@ def main() -> int:
     child = os.fork()
     if child == 0:
         try:
+            for limit, soft, hard in spec["rlimits"]:
+                resource.setrlimit(limit, (soft, hard))
             apply_seccomp(seccomp)
             os.execvp(argv[0], argv)
         except OSError as exc:

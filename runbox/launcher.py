@@ -7,6 +7,7 @@ runbox.box). The supervisor adds a new session and the clean environment built h
 enforces what the kernel does not: wall-clock time and output size.
 """
 
+import resource
 import shutil
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -31,22 +32,34 @@ class Limits:
     file_size_mb: int = 64
     disk_mb: int = 256
     log_size_mb: int = 64
+    cpu_percent: int = 100  # of one CPU, for the whole run (its cgroup); 0: no cap
 
     @classmethod
     def from_settings(cls, values: dict) -> "Limits":
         names = {f.name for f in fields(cls)}
         return cls(**{k: int(v) for k, v in values.items() if k in names})
 
+    def rlimits(self, address_space: bool = True) -> dict[int, tuple[int, int]]:
+        """Each process's own limits: the backstop of a run's cgroup, or all there is without
+        one. CPU: SIGXCPU at the soft limit (reported as such), SIGKILL two seconds later.
+        Address space only without a cgroup's memory limit: it counts what a runtime merely
+        reserves (node, the JVM)."""
+        limits = {
+            resource.RLIMIT_CPU: (self.cpu_seconds, self.cpu_seconds + 2),
+            resource.RLIMIT_NPROC: (self.processes, self.processes),
+            resource.RLIMIT_NOFILE: (self.open_files, self.open_files),
+            resource.RLIMIT_FSIZE: (self.file_size_mb * MB, self.file_size_mb * MB),
+            resource.RLIMIT_CORE: (0, 0),
+        }
+        if address_space:
+            limits[resource.RLIMIT_AS] = (self.memory_mb * MB, self.memory_mb * MB)
+        return limits
+
     def prlimit_args(self) -> list[str]:
-        # CPU: SIGXCPU at the soft limit (reported as such), SIGKILL two seconds later.
-        return [
-            f"--cpu={self.cpu_seconds}:{self.cpu_seconds + 2}",
-            f"--as={self.memory_mb * MB}",
-            f"--nproc={self.processes}",
-            f"--nofile={self.open_files}",
-            f"--fsize={self.file_size_mb * MB}",
-            "--core=0",
-        ]
+        names = {resource.RLIMIT_CPU: "cpu", resource.RLIMIT_NPROC: "nproc",
+                 resource.RLIMIT_NOFILE: "nofile", resource.RLIMIT_FSIZE: "fsize",
+                 resource.RLIMIT_CORE: "core", resource.RLIMIT_AS: "as"}  # fmt: skip
+        return [f"--{names[r]}={soft}:{hard}" for r, (soft, hard) in self.rlimits().items()]
 
 
 def _tool(name: str) -> str:
@@ -67,13 +80,12 @@ def command(
     box_args: list[str] = (),
 ) -> list[str]:
     """The run's command line; without `isolation` (tests of the supervisor) it stays as is.
-    In a box, `program_file` is where the program lies inside it."""
-    argv = [
-        _tool("prlimit"), *limits.prlimit_args(), "--",
-        *language.command(str(program_file)), *map(str, args),
-    ]  # fmt: skip
+    In a box, `program_file` is where the program lies inside it, and the box sets the
+    limits of its first process before the program starts (no prlimit to exec)."""
+    argv = [*language.command(str(program_file)), *map(str, args)]
     if isolation is None:
-        return [_tool("setpriv"), "--pdeathsig", "KILL", "--", *argv]
+        prlimit = [_tool("prlimit"), *limits.prlimit_args(), "--"]
+        return [_tool("setpriv"), "--pdeathsig", "KILL", "--", *prlimit, *argv]
     return isolation.wrap(argv, uid, socket_dir, list(box_args))
 
 

@@ -64,7 +64,7 @@ def _bind(sock: socket.socket, port: int) -> None:
 
 
 def bind_loopback(services: list[str]) -> list[socket.socket]:
-    """"tcp:PORT" / "udp:PORT" -> sockets bound to 127.0.0.1 (TCP ones listening)."""
+    """ "tcp:PORT" / "udp:PORT" -> sockets bound to 127.0.0.1 (TCP ones listening)."""
     made = []
     try:
         for service in services:

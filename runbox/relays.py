@@ -122,7 +122,7 @@ class _Datagrams(asyncio.DatagramProtocol):
 
 
 async def relay_to_host(service: str, inside: socket.socket) -> Relay:
-    """"tcp:PORT" / "udp:PORT": the run's socket, carried to the same port on the host's
+    """ "tcp:PORT" / "udp:PORT": the run's socket, carried to the same port on the host's
     loopback."""
     proto, port = service.split(":")
     relay = TcpRelay if proto == "tcp" else UdpRelay

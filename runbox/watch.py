@@ -73,8 +73,9 @@ def measure(box) -> Usage:
             usage.memory = max(usage.memory, vm_peak(pid))
         except (FileNotFoundError, ProcessLookupError):
             pass
-    if box.cgroup is not None:
-        usage.memory = max(usage.memory, box.cgroup.usage().memory)
+    if box.cgroup is not None:  # the run as one: what the memory limit counts
+        counted = box.cgroup.usage()
+        usage.memory = max(counted.memory_peak_bytes or 0, counted.memory_bytes)
     return usage
 
 
@@ -119,15 +120,34 @@ class RunWatch:
             wall = self.limits.wall_seconds
             if wall and time.monotonic() - started > wall:
                 on_limit(f"wall-clock time limit ({wall} s) reached")
+            for reason in await asyncio.to_thread(self.cgroup_limits_met):
+                on_limit(reason)
+
+    def cgroup_limits_met(self) -> list[str]:
+        """What the run's cgroup says ends it: CPU seconds across the run (the kernel only
+        counts them), memory (on cgroup v1 the OOM killer ends one process, not the run)."""
+        if self.box.cgroup is None:
+            return []
+        met = self.box.cgroup.met()
+        if "processes" in met:
+            self.signs.add("processes")
+        return [met[key] for key in ("cpu_seconds", "memory") if key in met]
 
     def notes(self) -> list[str]:
-        """The kernel-enforced limits the run came up against, for its log."""
-        limits, peaks, signs, notes = self.limits, self.peaks, self.signs, []
-        if peaks.processes >= limits.processes - 1 or "processes" in signs:
+        """The kernel-enforced limits the run came up against, for its log: its cgroup's own
+        count where it has one, else what the samples and its error messages suggest."""
+        limits, peaks, signs = self.limits, self.peaks, self.signs
+        met = self.box.cgroup.met() if self.box is not None and self.box.cgroup else {}
+        notes = [met[key] for key in ("memory", "processes") if key in met]
+        if "processes" not in met and (
+            peaks.processes >= limits.processes - 1 or "processes" in signs
+        ):
             notes.append(f"it reached its process limit ({limits.processes} processes)")
         if peaks.open_files >= limits.open_files - 2 or "open_files" in signs:
             notes.append(f"it reached its open files limit ({limits.open_files})")
-        if peaks.memory >= 0.9 * limits.memory_mb * MB or "memory" in signs:
+        if "memory" not in met and (
+            peaks.memory >= 0.9 * limits.memory_mb * MB or "memory" in signs
+        ):
             notes.append(f"it came up to its memory limit ({limits.memory_mb} MB)")
         if peaks.disk >= 0.95 * limits.disk_mb * MB or "disk" in signs:
             notes.append(f"it filled its folder ({limits.disk_mb} MB)")

@@ -10,8 +10,8 @@ have setpriv || need="$need util-linux"
 have prlimit || need="$need util-linux"
 have bwrap || need="$need bubblewrap"
 have slirp4netns || need="$need slirp4netns"
-[ -n "$need" ] || exit 0
 if [ "$(id -u)" -eq 0 ]; then
+    [ -n "$need" ] || exit 0
     export DEBIAN_FRONTEND=noninteractive
     apt-get update -qq
     apt-get install -y -qq --no-install-recommends $need >/dev/null
@@ -20,6 +20,6 @@ fi
 cat >&2 <<MSG
 robotide runs as $(id -un), not root: programs run in a rootless box (user namespaces, from
 util-linux and python3), with per-process limits instead of a cgroup unless your session
-delegates one. For runs as root instead (own OS account per run, cgroups, network 'full'),
-run 'make run' as root; missing for that:$need
+delegates one, and without network 'full'. The robot's page says what is in force. For more,
+run 'make run' as root${need:+ (it installs:$need)}.
 MSG

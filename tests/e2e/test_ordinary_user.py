@@ -334,8 +334,7 @@ def test_the_robot_says_what_the_rootless_box_cannot_give(app):
     """Runs as an ordinary user get per-process limits, not a cgroup across the run (see
     scripts/install-run-deps.sh): the robot's isolation must say so."""
     isolation = {r["name"]: r for r in app.api("GET", "/api/robots").json()}["sim"]["isolation"]
-    if "cgroup" not in isolation.lower():
-        pytest.xfail(f"finding: the isolation in force says nothing of cgroups: {isolation!r}")
+    assert "no cgroups" in isolation and "per-process rlimits only" in isolation, isolation
 
 
 def test_stopping_the_server_leaves_no_process_of_the_user(app, newcomer):

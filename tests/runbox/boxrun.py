@@ -54,6 +54,7 @@ async def run(spec: dict) -> dict:
     box = make_box(
         in_force, socket_dir=sockets, source=spec["source"].encode(), filename="main.py",
         disk_mb=limits.disk_mb, listeners=listeners, seccomp_fd=seccomp.open_filter_fd(),
+        rlimits=limits.rlimits(),
     )  # fmt: skip
     argv = launcher.command(
         PYTHON, in_force.home() / "main.py", limits, isolation=in_force,
