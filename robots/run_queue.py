@@ -74,6 +74,7 @@ class RunQueue:
     def __init__(self, agent):
         self.agent = agent
         self.waiting = 0  # runs queued on this robot, as last counted
+        self._counted = False  # whether the database has been asked since the agent started
         self.held = False  # after an emergency stop: nothing starts until someone resumes
         # The lease-holding run's turn while others wait: (its run id, loop time it ends).
         self._turn: tuple[int | str, float] | None = None
@@ -93,8 +94,11 @@ class RunQueue:
         if message.get("from_queue") or run_id in self.agent.cancelled:
             return False
         if not self._busy_for(message.get("user", "")) and not self.waiting and not self.held:
-            # Counted again: the queue is in the database, and may have changed meanwhile.
-            await self._count()
+            # Only this agent queues runs, so once counted its count is an upper bound (the
+            # web tier may cancel, never add): only before the first count is the database
+            # asked. A start then costs no database round trip.
+            if not self._counted:
+                await self._count()
             if not self.waiting:
                 return False
         reason = Run.HELD if self.held else ""
@@ -196,6 +200,7 @@ class RunQueue:
 
     async def _count(self) -> None:
         waiting, held = await database_sync_to_async(_queue_state)(self.agent.name)
+        self._counted = True
         self._set_waiting(waiting)
         self.held = bool(waiting) and (held or self.held)
 

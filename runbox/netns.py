@@ -9,15 +9,12 @@ rootless way).
 """
 
 import ctypes
-import errno
 import os
 import socket
 import subprocess
-import time
 from concurrent.futures import ThreadPoolExecutor
 
 CLONE_NEWNET = 0x40000000
-LOOPBACK_WAIT = 5.0
 _libc = ctypes.CDLL(None, use_errno=True)
 # One thread does all the entering: a thread that failed to come back is never reused by
 # anything else of the agent's.
@@ -49,20 +46,6 @@ def _setns(fd: int) -> None:
         raise OSError(err, f"setns: {os.strerror(err)}")
 
 
-def _bind(sock: socket.socket, port: int) -> None:
-    """Bind to 127.0.0.1 once bubblewrap has set the namespace's loopback up (it does so as
-    the sandbox starts, racing this thread: touching the loopback here would clash)."""
-    deadline = time.monotonic() + LOOPBACK_WAIT
-    while True:
-        try:
-            sock.bind(("127.0.0.1", port))
-            return
-        except OSError as exc:
-            if exc.errno != errno.EADDRNOTAVAIL or time.monotonic() > deadline:
-                raise
-            time.sleep(0.001)
-
-
 def bind_loopback(services: list[str]) -> list[socket.socket]:
     """ "tcp:PORT" / "udp:PORT" -> sockets bound to 127.0.0.1 (TCP ones listening)."""
     made = []
@@ -73,7 +56,7 @@ def bind_loopback(services: list[str]) -> list[socket.socket]:
             sock = socket.socket(socket.AF_INET, kind)
             made.append(sock)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            _bind(sock, int(port))
+            sock.bind(("0.0.0.0", int(port)))
             if kind == socket.SOCK_STREAM:
                 sock.listen(64)
             sock.setblocking(False)
