@@ -82,6 +82,15 @@ class Box:
         self.served: list = []
         self.nat: asyncio.subprocess.Process | None = None
 
+    def _join_cgroup(self) -> asyncio.Future:
+        """The box's first process joins the run's cgroup, in a thread and meanwhile the
+        rest: on cgroup v1 a move waits for an RCU grace period (6 ms and more)."""
+        if self.cgroup is None:
+            future = asyncio.get_running_loop().create_future()
+            future.set_result(None)
+            return future
+        return asyncio.ensure_future(asyncio.to_thread(self.cgroup.add, self.init_pid))
+
     async def _serve(self, sockets: list[socket.socket]) -> None:
         for listener, sock in zip(self.listeners, sockets, strict=True):
             self.served.append(await listener.serve(sock))
@@ -185,12 +194,12 @@ class BwrapBox(Box):
         self.init_pid, self.pidns = info["child-pid"], info["pid-namespace"]
         for limit, values in self.rlimits.items():
             resource.prlimit(self.init_pid, limit, values)
-        if self.cgroup is not None:
-            self.cgroup.add(self.init_pid)
+        joined = self._join_cgroup()
         if self.in_force.network != "none":
             await self._open_loopback()
         if self.in_force.network == "full":
             await self._open_nat()
+        await joined
         os.write(self.block_w, b"go")
         self._close(self.block_w)
 
@@ -280,9 +289,9 @@ class RootlessBox(Box):
             sockets = await asyncio.to_thread(self._handshake, spec)
             self.init_pid = first_child(launcher_pid)
             self.pidns = os.stat(f"/proc/{self.init_pid}/ns/pid").st_ino
-            if self.cgroup is not None:
-                self.cgroup.add(self.init_pid)
+            joined = self._join_cgroup()
             await self._serve(sockets)
+            await joined
             self.control.sendall(b"go\n")
         finally:
             self.control.close()
