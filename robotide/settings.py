@@ -289,6 +289,9 @@ RUN_ISOLATION = {
     "isolation": os.environ.get("ROBOTIDE_RUN_ISOLATION", "auto"),
     "network": os.environ.get("ROBOTIDE_RUN_NETWORK", "loopback"),
     "tmp_mb": env_int("ROBOTIDE_RUN_TMP_MB", 64),
+    # Host loopback ports relayed into runs ("tcp:9090"), private ranges `full` may reach.
+    "loopback_ports": [],
+    "allow_networks": [],
 }
 
 # -- Fleet mode: an agent says it is alive this often; a robot not heard from for

@@ -7,7 +7,8 @@ from django.utils import timezone
 
 # Settings for the runs on a robot; anything else in its `settings` goes to its driver.
 RUN_SETTINGS = (
-    "limits", "isolation", "network", "tmp_mb", "camera", "speech", "queue_turn_seconds",
+    "limits", "isolation", "network", "tmp_mb", "loopback_ports", "allow_networks", "camera",
+    "speech", "queue_turn_seconds",
 )  # fmt: skip
 
 

@@ -186,3 +186,37 @@ def test_the_runs_of_one_robot_do_not_share_a_namespace(app):
     run, log = attack(app, source, robot="lab")
     app.api("POST", f"/api/runs/{first}/stop")
     assert "REFUSED" in log and "BOUND too" in log and "REACHED" not in log, log
+
+
+def test_a_port_the_robot_names_is_relayed_and_no_other(app, host_listeners):
+    """A host service the robot's settings list in loopback_ports (say, a ROS bridge) is at
+    the same port on the run's 127.0.0.1; the TCP listener next to it is not."""
+    echo = socket.create_server(("127.0.0.1", 0))
+    port = echo.getsockname()[1]
+
+    def answer():
+        connection, _ = echo.accept()
+        with connection:
+            connection.sendall(b"bridge " + connection.recv(100))
+
+    thread = threading.Thread(target=answer, daemon=True)
+    thread.start()
+    body = {"name": "bridged", "url": "sim://",
+            "settings": {"network": "loopback", "loopback_ports": [f"tcp:{port}"]}}  # fmt: skip
+    assert app.api("POST", "/api/robots", body).status_code == 201
+    wait_for(lambda: app.api("GET", "/api/robots/bridged/sensors").status_code == 200)
+    source = f"""
+import socket
+s = socket.create_connection(("127.0.0.1", {port}), timeout=3)
+s.sendall(b"hello")
+print("GOT", s.recv(100))
+try:
+    socket.create_connection(("127.0.0.1", {host_listeners["tcp"]}), timeout=2)
+    print("REACHED the other")
+except OSError as e:
+    print("other refused", type(e).__name__)
+"""
+    run, log = attack(app, source, robot="bridged")
+    thread.join(5)
+    echo.close()
+    assert "GOT b'bridge hello'" in log and "other refused" in log, log
