@@ -8,6 +8,7 @@ from django.db import IntegrityError
 from ninja import Field, Router, Schema
 from ninja.errors import HttpError
 from ninja.responses import Status
+from pydantic import StrictBool
 
 from programs.access import OWN, get_program_for_user
 from programs.api import Error, ProgramOut, _program_out
@@ -21,8 +22,8 @@ groups_router = Router(tags=["groups"])
 class ShareIn(Body):
     user: str = ""
     group: str = ""
-    everyone: bool = False
-    can_edit: bool = False
+    everyone: StrictBool = False
+    can_edit: StrictBool = False
 
 
 class ShareOut(Schema):
@@ -100,7 +101,7 @@ class GroupOut(Schema):
 
 class MemberIn(Body):
     user: str
-    teacher: bool = False
+    teacher: StrictBool = False
 
 
 def _staff(request) -> None:

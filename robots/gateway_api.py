@@ -15,7 +15,7 @@ from django.http import FileResponse, HttpRequest
 from ninja import Field, Router, Schema
 from ninja.errors import HttpError
 from ninja.responses import Status
-from pydantic import model_validator
+from pydantic import StrictBool, model_validator
 
 from gateway import specs
 from programs.api import Error
@@ -35,7 +35,7 @@ class EndpointIn(Body):
     address: str | None = Field(None, description="HOST:PORT; udp and tcp", max_length=200)
     device: str | None = Field(None, description="serial device path", max_length=200)
     baud: int | None = Field(None, description="serial speed, bit/s")
-    read_only: bool = False
+    read_only: StrictBool = False
     allow: list[int] | None = Field(None, description="only these message ids pass")
     block: list[int] = Field([], description="these message ids never pass")
 
@@ -180,7 +180,7 @@ TLOG_NAME = re.compile(r"^[\w.-]+\.tlog$")
 
 
 class RecordIn(Body):
-    on: bool = Field(description="true: start a new .tlog of every routed frame; false: stop")
+    on: StrictBool = Field(description="true: start a new .tlog of every routed frame; false: stop")
 
 
 class RecordingFile(Schema):
