@@ -24,7 +24,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from runbox import netns
+from runbox import cgroups, netns
 from runbox.isolation import InForce, tool
 from runbox.netspec import blocked_ranges, host_addresses
 
@@ -34,6 +34,7 @@ INFO_MAX = 64 * 1024
 NAT_READY_TIMEOUT = 10.0
 INBOX_TIMEOUT = 10.0
 GONE_TIMEOUT = 5.0
+GATHER_ROUNDS = 20
 
 
 class BoxFailed(RuntimeError):
@@ -81,15 +82,33 @@ class Box:
         self.pidns: int | None = None
         self.served: list = []
         self.nat: asyncio.subprocess.Process | None = None
+        self._joining: asyncio.Future | None = None  # the processes joining the cgroup
 
-    def _join_cgroup(self) -> asyncio.Future:
-        """The box's first process joins the run's cgroup, in a thread and meanwhile the
-        rest: on cgroup v1 a move waits for an RCU grace period (6 ms and more)."""
-        if self.cgroup is None:
-            future = asyncio.get_running_loop().create_future()
-            future.set_result(None)
-            return future
-        return asyncio.ensure_future(asyncio.to_thread(self.cgroup.add, self.init_pid))
+    def _join_cgroup(self) -> None:
+        """The run's processes join its cgroup, in a thread, while the program starts.
+
+        On cgroup v1 a move waits for an RCU grace period: 6 to 20 ms, longer than the rest
+        of a start. Waiting for it would double a shell's start; not waiting leaves a few
+        milliseconds in which the program runs under its per-process limits alone, and
+        whatever it forked meanwhile is gathered into the cgroup as well (the watcher looks
+        again every sample)."""
+        if self.cgroup is not None:
+            self._joining = asyncio.ensure_future(asyncio.to_thread(self.gather))
+
+    def gather(self) -> list[int]:
+        """Move every process of the run that is not fully in its cgroup into it; returns
+        those moved. Their forks made during a move are caught by the next round."""
+        moved: list[int] = []
+        for _ in range(GATHER_ROUNDS):
+            inside = self.cgroup.members()
+            strays = [p for p in (self.init_pid, *self.processes()) if p not in inside]
+            if not strays:
+                break
+            for pid in strays:
+                with contextlib.suppress(cgroups.CgroupError):  # it has just exited
+                    self.cgroup.add(pid)
+                    moved.append(pid)
+        return moved
 
     async def _serve(self, sockets: list[socket.socket]) -> None:
         for listener, sock in zip(self.listeners, sockets, strict=True):
@@ -139,6 +158,8 @@ class Box:
         """After the program's end: whatever of the run is still there ends now (the
         kernel ends a pid namespace's processes one by one), then its sockets, NAT and
         cgroup go."""
+        if self._joining is not None:
+            await asyncio.gather(self._joining, return_exceptions=True)
         deadline = time.monotonic() + GONE_TIMEOUT
         while self.processes() and time.monotonic() < deadline:
             self.kill()
@@ -194,12 +215,11 @@ class BwrapBox(Box):
         self.init_pid, self.pidns = info["child-pid"], info["pid-namespace"]
         for limit, values in self.rlimits.items():
             resource.prlimit(self.init_pid, limit, values)
-        joined = self._join_cgroup()
+        self._join_cgroup()
         if self.in_force.network != "none":
             await self._open_loopback()
         if self.in_force.network == "full":
             await self._open_nat()
-        await joined
         os.write(self.block_w, b"go")
         self._close(self.block_w)
 
@@ -289,9 +309,8 @@ class RootlessBox(Box):
             sockets = await asyncio.to_thread(self._handshake, spec)
             self.init_pid = first_child(launcher_pid)
             self.pidns = os.stat(f"/proc/{self.init_pid}/ns/pid").st_ino
-            joined = self._join_cgroup()
+            self._join_cgroup()
             await self._serve(sockets)
-            await joined
             self.control.sendall(b"go\n")
         finally:
             self.control.close()

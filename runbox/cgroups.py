@@ -366,6 +366,19 @@ class RunCgroup:
                     pass
         return pids
 
+    def members(self) -> set[int]:
+        """The processes that are in the run's cgroup in every hierarchy (fully joined)."""
+        sets = []
+        for folder in self.folders():
+            pids = set()
+            for parent, _, _ in os.walk(folder):
+                try:
+                    pids.update(map(int, Path(parent, "cgroup.procs").read_text().split()))
+                except OSError:
+                    pass
+            sets.append(pids)
+        return set.intersection(*sets) if sets else set()
+
     def usage(self) -> CgroupUsage:
         d = self.dirs
         mem = d["memory"]

@@ -128,6 +128,7 @@ class RunWatch:
         counts them), memory (on cgroup v1 the OOM killer ends one process, not the run)."""
         if self.box.cgroup is None:
             return []
+        self.box.gather()  # a process that slipped out of its first move
         met = self.box.cgroup.met()
         if "processes" in met:
             self.signs.add("processes")

@@ -292,6 +292,27 @@ print("ALL BURNERS DONE")
     assert "CPU time limit (3 s) reached" in log, log
 
 
+def test_what_it_forks_at_once_is_in_its_cgroup_too(app, heavy):
+    """The run joins its cgroup while it starts: what it forks before that is gathered."""
+    source = """
+import os, time
+children = []
+for _ in range(8):
+    pid = os.fork()
+    if pid == 0:
+        time.sleep(1.5)
+        memory = [line for line in open("/proc/self/cgroup") if ":memory:" in line]
+        print("CG", memory[0].strip() if memory else "none", flush=True)
+        os._exit(0)
+    children.append(pid)
+for pid in children:
+    os.waitpid(pid, 0)
+"""
+    run, log = attack(app, source, robot=heavy)
+    lines = [line for line in log.splitlines() if line.startswith("CG ")]
+    assert len(lines) == 8 and all(f"-heavy-run-{run['id']}" in line for line in lines), log
+
+
 def test_it_cannot_make_a_user_namespace_of_its_own(app):
     """From there it would be root of a namespace: mounts, network set-up, kernel surface."""
     source = (
