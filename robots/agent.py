@@ -51,6 +51,9 @@ from runbox.watch import RunWatch, signal_account
 log = logging.getLogger(__name__)
 
 MB = 1024 * 1024
+# The outcome of a run whose box was made but which had been marked lost or failed meanwhile
+# (its state in the database stays as it is).
+NOT_OURS = "not started"
 # Inside a run's own network namespace the Robot API's TCP side is always here.
 ROBOT_API_PORT = 7010
 TELEMETRY_INTERVAL = 0.25
@@ -350,25 +353,34 @@ class RobotAgent:
         run_id = message["run_id"]
         if await self.queue.waits(message):  # the robot is busy: it waits its turn
             return
-        # Only a run still waiting to start: not one marked lost or failed meanwhile.
-        if not await database_sync_to_async(Run.claim)(run_id):
-            return
-        if run_id in self.cancelled:
-            self.cancelled.discard(run_id)
-            await self._end_run(run_id, "stopped", None, "stopped by user before it started")
-            return
+        # Only a run still waiting to start: not one marked lost or failed meanwhile. Asked
+        # while its box is made; the program waits for the answer (a database round trip
+        # less on every start).
+        claimed = asyncio.ensure_future(database_sync_to_async(Run.claim)(run_id))
         try:
-            active = await self._launch(run_id, message)
+            active = await self._launch(run_id, message, partial(self._may_start, run_id, claimed))
         except (
             LanguageUnavailable, launcher.LauncherUnavailable, IsolationUnavailable,
             ValueError, OSError,
         ) as exc:  # fmt: skip
-            await self._end_run(run_id, "failed", None, f"could not start: {exc}")
+            if await claimed:
+                await self._end_run(run_id, "failed", None, f"could not start: {exc}")
             return
-        await database_sync_to_async(Run.mark_running)(run_id, active.process.pid)
-        self._run_changed(run_id)
+        if active.process.started:
+            await database_sync_to_async(Run.mark_running)(run_id, active.process.pid)
+            self._run_changed(run_id)
 
-    async def _launch(self, run_id: int, message: dict) -> ActiveRun:
+    async def _may_start(self, run_id: int, claimed: asyncio.Future) -> tuple[str, str] | None:
+        """The gate of a run's box: None lets its program run."""
+        if not await claimed:
+            return NOT_OURS, "it no longer waited to start"
+        active = self.runs.get(run_id)
+        if run_id in self.cancelled or (active and active.process.stop_requested):
+            self.cancelled.discard(run_id)
+            return "stopped", "stopped by user before it started"
+        return None
+
+    async def _launch(self, run_id: int, message: dict, gate=None) -> ActiveRun:
         if (why := messages.check_filename(message["filename"])) is not None:
             raise ValueError(why)
         if self.isolation is None:
@@ -424,7 +436,7 @@ class RobotAgent:
         self.runs[run_id] = active
         self.tokens[token] = active
         try:
-            await process.start()
+            await process.start(gate)
         except BaseException:
             self.runs.pop(run_id, None)
             self.tokens.pop(token, None)
@@ -469,7 +481,8 @@ class RobotAgent:
         if self.lease.release(active.run_id):
             self._lease_changed()
         await active.process.box.close()
-        await self._end_run(active.run_id, outcome.state, outcome.exit_code, outcome.reason)
+        if outcome.state != NOT_OURS:  # else lost or failed meanwhile: its state stays
+            await self._end_run(active.run_id, outcome.state, outcome.exit_code, outcome.reason)
 
     async def _end_run(self, run_id, state, exit_code, reason) -> None:
         await database_sync_to_async(Run.mark_ended)(run_id, state, exit_code, reason)

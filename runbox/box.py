@@ -41,6 +41,15 @@ class BoxFailed(RuntimeError):
     pass
 
 
+class NotStarted(Exception):
+    """The gate said no: args are the run's (state, reason)."""
+
+
+async def _pass(gate) -> None:
+    if gate is not None and (verdict := await gate()) is not None:
+        raise NotStarted(*verdict)
+
+
 @dataclass(frozen=True)
 class Listener:
     """A service on the run's 127.0.0.1: "tcp:PORT" or "udp:PORT", and what serves the socket
@@ -208,8 +217,8 @@ class BwrapBox(Box):
 
     # -- between bubblewrap's start and the program's -------------------------------------
 
-    async def open(self, launcher_pid: int) -> None:
-        """Once bubblewrap runs: cgroup, sockets, NAT, then let the program start."""
+    async def open(self, launcher_pid: int, gate=None) -> None:
+        """Once bubblewrap runs: cgroup, sockets, NAT, the gate, then the program starts."""
         self._close(*self.pass_fds())  # the sandbox has them now
         info = await self._read_info()
         self.init_pid, self.pidns = info["child-pid"], info["pid-namespace"]
@@ -220,6 +229,7 @@ class BwrapBox(Box):
             await self._open_loopback()
         if self.in_force.network == "full":
             await self._open_nat()
+        await _pass(gate)
         os.write(self.block_w, b"go")
         self._close(self.block_w)
 
@@ -298,7 +308,7 @@ class RootlessBox(Box):
         fds = (self.theirs, self.program_fd)
         return fds if self.seccomp_fd is None else (*fds, self.seccomp_fd)
 
-    async def open(self, launcher_pid: int) -> None:
+    async def open(self, launcher_pid: int, gate=None) -> None:
         spec = {
             **self.spec, "program_fd": self.program_fd, "seccomp_fd": self.seccomp_fd,
             "services": [listener.service for listener in self.listeners],
@@ -311,6 +321,7 @@ class RootlessBox(Box):
             self.pidns = os.stat(f"/proc/{self.init_pid}/ns/pid").st_ino
             self._join_cgroup()
             await self._serve(sockets)
+            await _pass(gate)
             self.control.sendall(b"go\n")
         finally:
             self.control.close()

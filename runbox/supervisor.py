@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from subprocess import DEVNULL, PIPE
 
+from runbox.box import NotStarted
 from runbox.watch import RunWatch
 
 STDOUT, STDERR, SYSTEM = b"o", b"e", b"s"
@@ -81,6 +82,7 @@ class RunProcess:
         self.grace = grace
         self.batch_interval = batch_interval
         self.pid: int | None = None
+        self.started = False  # the program itself runs (its box let it)
         self.returncode: int | None = None
         self.lines_written = 0
         self._partial = {1: b"", 2: b""}
@@ -98,7 +100,10 @@ class RunProcess:
         self._stop_state = "stopped"
         self._done: asyncio.Future | None = None
 
-    async def start(self) -> int:
+    async def start(self, gate=None) -> int:
+        """Spawn the program. `gate`: a coroutine function the box awaits just before the
+        program may run (its set-up done meanwhile); None lets it run, (state, reason) ends
+        it there as NotStarted."""
         loop = asyncio.get_running_loop()
         self._done = loop.create_future()
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
@@ -124,14 +129,25 @@ class RunProcess:
             raise
         if self.box is not None:
             try:
-                await self.box.open(self.pid)
+                await self.box.open(self.pid, gate)
+            except NotStarted as refused:  # whoever started it no longer wants it to run
+                self._stop_state, self._stop_reason = refused.args
+                self._signal_group(signal.SIGKILL)
             except Exception as exc:  # the program never starts: the run fails, saying why
                 self.system_line(f"its box could not be made: {exc}")
                 self._stop_reason, self._stop_state = f"could not start: {exc}", "failed"
                 self._signal_group(signal.SIGKILL)
+            else:
+                self.started = True
+        else:
+            self.started = True
         if self.watch is not None:
             self._watcher = loop.create_task(self.watch.run(self._limit_reached))
         return self.pid
+
+    @property
+    def stop_requested(self) -> bool:
+        return self._stop_reason is not None
 
     @property
     def running(self) -> bool:

@@ -241,3 +241,20 @@ def test_a_robot_that_is_away_is_reported_not_waited_for(any_appliance):
         what="the agent to report its robot away",
     )
     assert name in response.json()["detail"]
+
+
+def test_a_run_stopped_as_it_starts_never_runs_a_line(any_appliance):
+    """Its stop may come while its box is made: then its program must not run at all, nor
+    be left running until the stop's grace period ends it."""
+    app = any_appliance
+    program = app.create_program("stopped at once", "print('RAN', flush=True)\n" + FOREVER)
+    for _ in range(5):
+        run_id = app.run_program(program["id"])["id"]
+        app.api("POST", f"/api/runs/{run_id}/stop")
+        run = app.wait_run(run_id, timeout=15)
+        log = app.api("GET", f"/api/runs/{run_id}/log").text
+        assert run["state"] == "stopped", (run, log)
+        if run["reason"] == "stopped by user before it started":
+            assert "RAN" not in log and "tick" not in log, log
+        else:  # it had started: the SIGTERM ended it at once, no grace needed
+            assert "did not stop within" not in log, log

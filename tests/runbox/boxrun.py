@@ -68,7 +68,11 @@ async def run(spec: dict) -> dict:
         watch=RunWatch(limits, box), box=box, grace=float(spec.get("grace", 1.0)),
     )  # fmt: skip
     started = time.monotonic()
-    await process.start()
+
+    async def gate():  # what the agent's claim of the run says, just before the program runs
+        return ("stopped", spec["refuse"]) if spec.get("refuse") else None
+
+    await process.start(gate)
     if spec.get("stop_after"):
         await asyncio.sleep(spec["stop_after"])
         process.stop()
@@ -79,7 +83,7 @@ async def run(spec: dict) -> dict:
     return {
         "state": outcome.state, "exit_code": outcome.exit_code, "reason": outcome.reason,
         "log": log, "seconds": time.monotonic() - started, "left": left,
-        "rootless": in_force.rootless,
+        "rootless": in_force.rootless, "started": process.started,
     }  # fmt: skip
 
 

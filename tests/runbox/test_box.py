@@ -128,3 +128,16 @@ for argv in (["unshare", "-Ur", "true"], ["unshare", "-n", "true"],
 """
     result = box_run(mode, readable_copy, source)
     assert result["log"].count("refused") == 3 and "ALLOWED" not in result["log"], result
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_gate_that_says_no_keeps_the_program_from_running(mode, readable_copy):
+    """The agent claims the run while its box is made: a run stopped or lost meanwhile never
+    runs a line of its program."""
+    source = "print('RAN', flush=True)\nopen('/home/robot/ran', 'w').close()\n"
+    result = box_run(mode, readable_copy, source, refuse="stopped by user before it started")
+    assert result["state"] == "stopped" and result["started"] is False, result
+    assert result["reason"] == "stopped by user before it started"
+    assert "RAN" not in result["log"] and result["left"] == []
+    ran = box_run(mode, readable_copy, source)
+    assert ran["state"] == "finished" and "RAN" in ran["log"] and ran["started"] is True
