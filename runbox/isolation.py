@@ -26,7 +26,7 @@ import os
 import shutil
 import subprocess
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
@@ -126,15 +126,10 @@ class InForce:
     policy: Policy
     clients_dir: Path  # the Robot API clients, mounted read-only for the run
     rootless: bool = False
-    extra: dict = field(default_factory=dict, compare=False)
 
     @property
     def network(self) -> str:
         return self.policy.network
-
-    @property
-    def sandbox(self) -> bool:
-        return True
 
     def describe(self, cgroups: str = "") -> str:
         account = "own user namespace" if self.rootless else "own OS account"
@@ -150,10 +145,10 @@ class InForce:
     API_DIR = Path("/run/robot")
     CLIENTS = Path("/opt/robotide/clients")
 
-    def home(self, workdir: Path | None = None) -> Path:
+    def home(self) -> Path:
         return self.HOME
 
-    def api_dir(self, socket_dir: Path | None = None) -> Path:
+    def api_dir(self) -> Path:
         return self.API_DIR
 
     def clients(self) -> Path:
