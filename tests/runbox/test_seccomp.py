@@ -100,10 +100,7 @@ def test_compiles_for_both_architectures(arch):
     assert seccomp.filter_bytes(arch) is program  # cached
 
 
-@pytest.mark.parametrize("arch", ARCHES)
-@pytest.mark.parametrize(
-    "name, args, action",
-    [
+DECISIONS = [
         ("read", (), ALLOW), ("write", (), ALLOW), ("openat", (), ALLOW),
         ("execve", (), ALLOW), ("getpid", (), ALLOW), ("get_mempolicy", (), ALLOW),
         ("seccomp", (), ALLOW), ("landlock_create_ruleset", (), ALLOW),
@@ -124,11 +121,19 @@ def test_compiles_for_both_architectures(arch):
         ("ioctl", (1, 0x5401), ALLOW),  # TCGETS
         ("ioctl", (1, 0x5412), EPERM), ("ioctl", (1, 0xDEAD0000_00005412), EPERM),  # TIOCSTI
         ("ioctl", (1, 0x541C), EPERM),  # TIOCLINUX
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "arch, name, args, action",
+    [  # arm's arguments are 32 bits wide: the cases with a top half are not arm's
+        (arch, *case)
+        for arch in ARCHES
+        for case in DECISIONS
+        if not (arch == "arm" and any(a >= 2**32 for a in case[1]))
     ],
-)  # fmt: skip
+)
 def test_decisions(arch, name, args, action):
-    if arch == "arm" and any(a >= 2**32 for a in args):
-        pytest.skip("32-bit arguments on arm")
     assert decide(arch, name, *args) == action
 
 
