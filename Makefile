@@ -31,7 +31,7 @@ bench: $(BIN)/robotide
 # The compose file's services as processes on this machine, on a PostgreSQL and a Redis of
 # their own with passwords (in var/fleet: FLEET_DATA), not the machine's servers.
 fleet: $(BIN)/robotide
-	./scripts/install-test-deps.sh
+	./scripts/install-test-deps.sh --packages-only
 	$(BIN)/python -m robotide.fleet
 
 # The passwords of docker compose's postgres and redis, generated once into .env (mode 0600);

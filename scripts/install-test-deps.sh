@@ -39,7 +39,9 @@ fi
 # pymavlink for the programs of the MAVLink gateway's tests.
 "$(dirname "$0")/install-program-libs.sh"
 
-# The services, as this kind of machine starts them, if they are down.
+# The services, as this kind of machine starts them, if they are down (not for `make fleet`,
+# which runs servers of its own: --packages-only).
+[ "${1:-}" = "--packages-only" ] && exit 0
 if ! redis-cli -h 127.0.0.1 ping >/dev/null 2>&1; then
     mkdir -p /var/lib/redis /var/log/redis
     redis-server --daemonize yes --bind 127.0.0.1 -::1 --port 6379 --save "" \
