@@ -388,22 +388,38 @@ class RobotAgent:
         language = get_language(message["language"])
         directory = settings.RUNS_DIR / str(run_id)
         directory.mkdir(parents=True, exist_ok=True)
-        uid = self.isolation.uid(run_id, str(settings.DATA_DIR))
         limits = launcher.Limits.from_settings(self.limits)
-        token = secrets.token_urlsafe(24)
         program_env = self.gateway.program_env()
         cgroup = self._cgroup(run_id, limits)
-        box = make_box(
-            self.isolation,
-            socket_dir=self.socket_dir,
-            source=message["source"].encode(),
-            filename=message["filename"],
-            disk_mb=limits.disk_mb,
-            listeners=self._listeners(program_env),
-            seccomp_fd=seccomp.open_filter_fd(),
-            cgroup=cgroup,
-            rlimits=limits.rlimits(address_space=cgroup is None),
-        )
+        try:
+            box = make_box(
+                self.isolation,
+                socket_dir=self.socket_dir,
+                source=message["source"].encode(),
+                filename=message["filename"],
+                disk_mb=limits.disk_mb,
+                listeners=self._listeners(program_env),
+                seccomp_fd=seccomp.open_filter_fd(),
+                cgroup=cgroup,
+                rlimits=limits.rlimits(address_space=cgroup is None),
+            )
+        except BaseException:
+            if cgroup is not None:
+                await asyncio.to_thread(cgroup.remove)
+            raise
+        try:
+            return await self._start_boxed(
+                run_id, message, language, limits, box, program_env, gate
+            )
+        except BaseException:
+            await box.close()  # its cgroup and descriptors go with it
+            raise
+
+    async def _start_boxed(self, run_id, message, language, limits, box, program_env, gate):
+        """The program in its box as the run's process, registered before it starts."""
+        directory = settings.RUNS_DIR / str(run_id)
+        uid = self.isolation.uid(run_id, str(settings.DATA_DIR))
+        token = secrets.token_urlsafe(24)
         extra = {
             "ROBOT_API": f"unix:{self.isolation.api_dir() / self.server.unix_path.name}",
             "ROBOT_TOKEN": token,
@@ -440,7 +456,6 @@ class RobotAgent:
         except BaseException:
             self.runs.pop(run_id, None)
             self.tokens.pop(token, None)
-            await box.close()
             raise
         active.watcher = asyncio.create_task(self._watch(active))
         return active
