@@ -29,6 +29,9 @@ CW_ENABLE = 0x000F  # controlword: enable operation
 CW_HALT = 0x0100  # controlword bit 8: halt
 CW_SHUTDOWN = 0x0006  # controlword: shutdown, to READY TO SWITCH ON (power stage off)
 NMT_OPERATIONAL = 5
+# Set-up goes by SDO only: a drive (or a loaded computer) slow to answer once is not gone;
+# canopen's 0.3 s failed the set-up now and then on a busy 2-core machine.
+SDO_RESPONSE_TIMEOUT = 1.0
 #: The PDOs the driver maps: (TPDO or RPDO, number) -> objects. TPDOs go on every SYNC, the
 #: RPDO at once; the drives' other predefined PDOs are switched off.
 PDO_LAYOUT = {
@@ -129,6 +132,7 @@ class Cia402Link(Link):
             node.TIMEOUT_CHECK_TPDO = max(0.2, 4 * profile.sync)
             node.TIMEOUT_SWITCH_STATE_SINGLE = max(0.4, 8 * profile.sync)
             node.TIMEOUT_SWITCH_STATE_FINAL = max(0.8, 16 * profile.sync)
+            node.sdo.RESPONSE_TIMEOUT = SDO_RESPONSE_TIMEOUT
             network.add_node(node)
             node.nmt.add_heartbeat_callback(partial(self._on_heartbeat, side))
             self.nodes[side] = node
