@@ -162,7 +162,8 @@ class RobotAgent:
         """The robot's row, and what it says about runs here."""
         robot = await database_sync_to_async(Robot.objects.get)(name=self.name)
         self.limits = robot.run_limits(settings.RUN_DEFAULTS)
-        self.isolation, self.isolation_error = resolve_isolation(robot)
+        # Off the event loop: the first look may start a process and compile the seccomp filter.
+        self.isolation, self.isolation_error = await asyncio.to_thread(resolve_isolation, robot)
         self.cgroups = await asyncio.to_thread(cgroups.detect)
         await database_sync_to_async(Robot.objects.filter(name=self.name).update)(
             isolation=self.isolation.describe(self.cgroups.describe())

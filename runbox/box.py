@@ -170,7 +170,7 @@ class Box:
         if self._joining is not None:
             await asyncio.gather(self._joining, return_exceptions=True)
         deadline = time.monotonic() + GONE_TIMEOUT
-        while self.processes() and time.monotonic() < deadline:
+        while await asyncio.to_thread(self.processes) and time.monotonic() < deadline:
             self.kill()
             await asyncio.sleep(0.01)
         for served in self.served:

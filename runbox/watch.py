@@ -54,8 +54,8 @@ def signal_account(uid: int, sig: int) -> int:
 class Usage:
     processes: int = 0
     open_files: int = 0
-    memory: int = 0  # bytes of address space, the most any one process had
-    disk: int = 0  # bytes in the working directory
+    memory: int = 0  # bytes: the run's cgroup's count, else the most one process reserved
+    disk: int = 0  # bytes in the run's folder (its tmpfs)
 
     def peak(self, other: "Usage") -> None:
         self.processes = max(self.processes, other.processes)
