@@ -184,8 +184,8 @@ def echo_services() -> None:
 async def boxed_client(work: Path, tcp: int, udp: int) -> tuple[str, str]:
     """The client program in a box whose 127.0.0.1 TCP and UDP ports are relays to the host's."""
     from programs.languages import CLIENTS_DIR, get_language
-    from runbox import launcher, seccomp
-    from runbox.box import Listener, make_box
+    from runbox import SYSTEM_PATH, launcher, seccomp
+    from runbox.box import Launch, Listener, make_box
     from runbox.isolation import Policy
     from runbox.relays import relay_to_host
     from runbox.supervisor import RunProcess
@@ -198,20 +198,24 @@ async def boxed_client(work: Path, tcp: int, udp: int) -> tuple[str, str]:
     sockets.mkdir(exist_ok=True)
     services = [f"tcp:{tcp}", f"udp:{udp}"]
     box = make_box(
-        in_force, socket_dir=sockets, source=CLIENT.encode(), filename="client.py",
-        disk_mb=limits.disk_mb, seccomp_fd=seccomp.open_filter_fd(),
+        in_force, socket_dir=sockets, disk_mb=limits.disk_mb,
+        seccomp_fd=seccomp.open_filter_fd(),
         listeners=[Listener(s, partial(relay_to_host, s)) for s in services],
     )  # fmt: skip
-    argv = launcher.command(
-        language, in_force.home() / "client.py", limits, (tcp, udp), isolation=in_force,
-        uid=in_force.uid(1, str(work)), socket_dir=sockets, box_args=box.args(),
-    )  # fmt: skip
+    program = in_force.home() / "client.py"
+    argv = [*language.command(str(program)), str(tcp), str(udp)]
     env = launcher.environment(language, in_force.home(), {}, clients_dir=in_force.clients())
+    launch = Launch(
+        "client.py",
+        CLIENT.encode(),
+        in_force.program_command(argv, in_force.uid(1, str(work))),
+        env,
+    )
     process = RunProcess(
-        argv, env=env, cwd=work, log_path=work / "boxed.log", on_output=lambda *_: None,
-        watch=RunWatch(limits, box), box=box,
+        box.command(), env={"PATH": SYSTEM_PATH}, cwd=work, log_path=work / "boxed.log",
+        on_output=lambda *_: None, watch=RunWatch(limits, box), box=box,
     )  # fmt: skip
-    await process.start()
+    await process.start(launch=launch)
     try:
         outcome = await asyncio.wait_for(process.wait(), 120)
     finally:

@@ -11,18 +11,22 @@ baselines. A request::
     {"stage": "box", "command": ["/usr/bin/python3", "-u"], "source": "...",
      "filename": "main.py", "env": {...}}
 
-stages (cumulative, root only but "bare" and "box"):
+stages (cumulative, root only but "bare", "box" and "ahead"):
     bare                    the interpreter on the program file in a folder here, unboxed
     bwrap                   bubblewrap with the box's mounts, namespaces, folder and seccomp
                             filter, no --info-fd/--block-fd (runs at once), as root inside
     bwrap+setpriv           + setpriv into the run's account (as the launcher does)
     bwrap+setpriv+prlimit   + prlimit with the default limits
-    box                     the whole chain as the agent builds it: runbox.box.make_box (with
-                            the Robot API's tcp:7010 listener), launcher.command, the spawn,
-                            box.open() (info-fd read, setns + bind, serve, unblock)
-Each answer: {"first": spawn -> first stdout data, "prepare": box + argv built, "steps": {...},
-"close": box.close() after the exit, ...}, seconds; the spawn is loop.subprocess_exec with
-RunProcess's options (new session, umask 022, pass_fds, clean env, pipes).
+    box                     the whole chain as the agent builds it when no box is ready:
+                            runbox.box.make_box (with the Robot API's tcp:7010 listener), the
+                            spawn, box.prepare() (info-fd read, setns + bind, serve, unblock),
+                            box.go() (the script to the box's waiting shell)
+    ahead                   a box made and prepared before the request (not timed), as the
+                            agent keeps one: only box.go() and what follows
+Each answer: {"first": spawn (ahead: go) -> first stdout data, "prepare": box + argv built,
+"steps": {...}, "close": box.close() after the exit, ...}, seconds; the spawn is
+loop.subprocess_exec with RunProcess's options (new session, umask 022, pass_fds, clean env,
+pipes).
 """
 
 import asyncio
@@ -39,8 +43,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from runbox import launcher, seccomp  # noqa: E402
-from runbox.box import BwrapBox, Listener, RootlessBox  # noqa: E402
+from runbox import SYSTEM_PATH, launcher, seccomp  # noqa: E402
+from runbox.box import BwrapBox, Launch, Listener, RootlessBox  # noqa: E402
 from runbox.isolation import Policy, tool  # noqa: E402
 
 CLIENTS = ROOT / "programs" / "clients"
@@ -48,16 +52,20 @@ now = time.perf_counter
 
 
 class Timed:
-    """Mixed into a box: when each step of open() ended (wrapping its methods, not copying
-    open(): the steps are runbox's own)."""
+    """Mixed into a box: when each step of prepare() and go() ended (wrapping its methods,
+    not copying them: the steps are runbox's own)."""
 
     def _mark(self, name: str) -> None:
         self.marks.append((name, now()))
 
-    async def open(self, launcher_pid: int) -> None:
-        self.marks = [("open", now())]
-        await super().open(launcher_pid)
+    async def prepare(self, launcher_pid: int, wait_for_cgroup: bool = True) -> None:
+        self.marks = [("prepare", now())]
+        await super().prepare(launcher_pid, wait_for_cgroup)
         self._mark("unblocked")
+
+    async def go(self, launch, gate=None) -> None:
+        await super().go(launch, gate)
+        self._mark("program handed over")
 
     async def _read_info(self):  # BwrapBox
         info = await super()._read_info()
@@ -138,32 +146,19 @@ class Driver:
         self.count = 0
 
     async def start(self, req: dict) -> dict:
-        stage, source, filename = req["stage"], req["source"].encode(), req["filename"]
+        stage = req["stage"]
+        if stage in ("box", "ahead"):
+            return await self.boxed(req, ahead=stage == "ahead")
+        source, filename = req["source"].encode(), req["filename"]
         language = Language(req["command"])
-        env = dict(req["env"])
         in_force, limits = self.in_force, self.limits
         self.count += 1
-        box = None
         fds: list[int] = []
         t0 = now()
         if stage == "bare":
             file = self.work / filename
             file.write_bytes(source)
-            argv, cwd = language.command(str(file)), self.work
-        elif stage == "box":
-            kind = TimedRootlessBox if in_force.rootless else TimedBwrapBox
-            options = {"socket_dir": self.sockets} if in_force.rootless else {}
-            box = kind(
-                in_force, source=source, filename=filename, disk_mb=limits.disk_mb,
-                listeners=[Listener("tcp:7010", serve_echo)],
-                seccomp_fd=seccomp.open_filter_fd(), **options,
-            )  # fmt: skip
-            argv = launcher.command(
-                language, in_force.home() / filename, limits, isolation=in_force,
-                uid=in_force.uid(self.count, str(self.work)), socket_dir=self.sockets,
-                box_args=box.args(),
-            )  # fmt: skip
-            cwd = self.work
+            argv = language.command(str(file))
         else:
             if in_force.rootless:
                 raise ValueError(f"stage {stage} is root's only")
@@ -176,29 +171,61 @@ class Driver:
             if "prlimit" in stage:
                 inner = [tool("prlimit"), *limits.prlimit_args(), "--", *inner]
             if "setpriv" in stage:
-                uid = in_force.uid(self.count, str(self.work))
-                inner = [
-                    tool("setpriv"), f"--reuid={uid}", f"--regid={uid}", "--clear-groups",
-                    "--no-new-privs", "--", *inner,
-                ]  # fmt: skip
+                inner = in_force.program_command(inner, in_force.uid(self.count, str(self.work)))
             argv = [
                 *in_force.bwrap(self.sockets), "--seccomp", str(filter_fd),
-                *in_force.folder_args(limits.disk_mb, program, filename), "--", *inner,
+                *in_force.folder_args(limits.disk_mb), "--perms", "0644",
+                "--file", str(program), str(in_force.home() / filename), "--", *inner,
             ]  # fmt: skip
-            cwd = self.work
         t_prepared = now()
-        loop = asyncio.get_running_loop()
-        transport, proto = await loop.subprocess_exec(
-            FirstLine, *argv, stdin=DEVNULL, stdout=PIPE, stderr=PIPE, cwd=cwd, env=env,
-            start_new_session=True, umask=0o022,
-            pass_fds=box.pass_fds() if box else tuple(fds),
-        )  # fmt: skip
+        transport, proto = await self.spawn(argv, req["env"], DEVNULL, tuple(fds))
         t_spawned = now()
         for fd in fds:
             os.close(fd)
-        if box is not None:
-            await box.open(transport.get_pid())
+        return await self.finish(stage, transport, proto, t0, t_prepared, t_spawned, t_spawned)
+
+    async def spawn(self, argv, env, stdin, pass_fds):
+        loop = asyncio.get_running_loop()
+        return await loop.subprocess_exec(
+            FirstLine, *argv, stdin=stdin, stdout=PIPE, stderr=PIPE, cwd=self.work, env=env,
+            start_new_session=True, umask=0o022, pass_fds=pass_fds,
+        )  # fmt: skip
+
+    async def boxed(self, req: dict, ahead: bool) -> dict:
+        """As the agent: a box made (ahead: before the clock starts), then the run's go()."""
+        in_force, limits = self.in_force, self.limits
+        self.count += 1
+        t0 = now()
+        box = (TimedRootlessBox if in_force.rootless else TimedBwrapBox)(
+            in_force, socket_dir=self.sockets, disk_mb=limits.disk_mb,
+            listeners=[Listener("tcp:7010", serve_echo)], seccomp_fd=seccomp.open_filter_fd(),
+        )  # fmt: skip
+        argv = in_force.program_command(
+            Language(req["command"]).command(str(in_force.home() / req["filename"])),
+            in_force.uid(self.count, str(self.work)),
+        )
+        launch = Launch(req["filename"], req["source"].encode(), argv, dict(req["env"]))
+        t_prepared = now()
+        transport, proto = await self.spawn(
+            box.command(), {"PATH": SYSTEM_PATH}, box.stdin() or DEVNULL, box.pass_fds()
+        )
+        t_spawned = now()
+        await box.prepare(transport.get_pid(), wait_for_cgroup=ahead)
+        if ahead:
+            await asyncio.sleep(0.05)  # the box waits, as one made ahead does
+            t_prepared = t_spawned = now()
+            box.marks = [("go", t_prepared)]
+        await box.go(launch)
         t_opened = now()
+        try:
+            return await self.finish(
+                req["stage"], transport, proto, t0, t_prepared, t_spawned, t_opened, box
+            )
+        finally:
+            box.kill()
+            await box.close()
+
+    async def finish(self, stage, transport, proto, t0, t_prepared, t_spawned, t_opened, box=None):
         first = await asyncio.wait_for(proto.first, 10)
         await asyncio.wait_for(proto.exited, 10)
         transport.close()
@@ -215,7 +242,7 @@ class Driver:
             "steps": box.steps() if box is not None else {},
             "close": t_closed - t_exit,
             "output": proto.data.decode(errors="replace")[:200],
-            "rootless": in_force.rootless,
+            "rootless": self.in_force.rootless,
             "returncode": transport.get_returncode(),
         }
 

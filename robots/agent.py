@@ -41,8 +41,9 @@ from robots.lease import ControlLease, Holder, LeaseHeld
 from robots.models import Robot, agent_channel, robot_group
 from robots.robot_api import RobotApi
 from robots.run_queue import RunQueue
-from runbox import cgroups, launcher, seccomp
-from runbox.box import Listener, make_box
+from runbox import SYSTEM_PATH, cgroups, launcher, seccomp
+from runbox.ahead import Ahead, discard
+from runbox.box import Launch, Listener, make_box
 from runbox.isolation import InForce, IsolationUnavailable, Policy, run_uid
 from runbox.relays import relay_to_host
 from runbox.supervisor import RunProcess
@@ -63,6 +64,16 @@ LINK_RETRY_MAX = 30.0  # seconds between tries to open a robot that is away
 # A hand drive lasts this long unless the browser repeats it: a page that hangs, loses its
 # network or is closed without a goodbye cannot leave the robot driving.
 TELEOP_DEADMAN = 0.4
+
+
+@dataclass(frozen=True)
+class BoxKind:
+    """What a run's box is made for: one made ahead for other settings is not used."""
+
+    isolation: InForce
+    limits: launcher.Limits
+    services: tuple[str, ...]  # "tcp:7010", "udp:14551": what its 127.0.0.1 offers
+    grace: float
 
 
 @dataclass
@@ -114,6 +125,7 @@ class RobotAgent:
         self.bridges = Bridges(self)
         self.handlers.update(self.bridges.handlers)
         self.queue = RunQueue(self)  # runs waiting their turn while the robot is busy
+        self.boxes = Ahead(self._make_box, self.cgroup_prefix)  # one made ahead of its run
         self.handlers.update(self.queue.handlers)
         self.lent_to: str | None = None  # a serial bridge client has the robot's device
         self._outbox: asyncio.Queue = asyncio.Queue()
@@ -156,6 +168,7 @@ class RobotAgent:
             asyncio.create_task(self.queue.serve(), name=f"{self.name}-queue"),
         ]
         self.ready.set()
+        self._box_ahead()
         log.info("agent %s: %s, Robot API on %s", self.name, robot.url, self.api_address)
 
     async def _load_robot(self) -> Robot:
@@ -178,6 +191,8 @@ class RobotAgent:
         Motion stops; programs keep running and see the robot again once it is open.
         """
         robot = await self._load_robot()
+        await self.boxes.close()  # made for the settings of old
+        self._box_ahead()
         try:
             driver = rhal.connect(robot.url, **robot.driver_options())
         except (TypeError, ValueError, rhal.RhalError) as exc:  # the edit paths check first
@@ -240,6 +255,7 @@ class RobotAgent:
 
     async def shutdown(self) -> None:
         await self.queue.close()  # nothing more starts from the queue
+        await self.boxes.close()
         if self._starting:  # let starts under way finish, so their programs are stopped too
             await asyncio.wait(self._starting, timeout=5)
         for active in list(self.runs.values()):
@@ -387,37 +403,17 @@ class RobotAgent:
         if self.isolation is None:
             raise IsolationUnavailable(self.isolation_error)
         language = get_language(message["language"])
-        directory = settings.RUNS_DIR / str(run_id)
-        directory.mkdir(parents=True, exist_ok=True)
-        limits = launcher.Limits.from_settings(self.limits)
         program_env = self.gateway.program_env()
-        cgroup = self._cgroup(run_id, limits)
+        kind = self._box_kind(program_env)
+        process = await self.boxes.take(kind, f"run-{run_id}")
         try:
-            box = make_box(
-                self.isolation,
-                socket_dir=self.socket_dir,
-                source=message["source"].encode(),
-                filename=message["filename"],
-                disk_mb=limits.disk_mb,
-                listeners=self._listeners(program_env),
-                seccomp_fd=seccomp.open_filter_fd(),
-                cgroup=cgroup,
-                rlimits=limits.rlimits(address_space=cgroup is None),
-            )
+            return await self._begin(run_id, message, language, process, program_env, gate)
         except BaseException:
-            if cgroup is not None:
-                await asyncio.to_thread(cgroup.remove)
-            raise
-        try:
-            return await self._start_boxed(
-                run_id, message, language, limits, box, program_env, gate
-            )
-        except BaseException:
-            await box.close()  # its cgroup and descriptors go with it
+            await discard(process)  # its cgroup and descriptors go with it
             raise
 
-    async def _start_boxed(self, run_id, message, language, limits, box, program_env, gate):
-        """The program in its box as the run's process, registered before it starts."""
+    async def _begin(self, run_id, message, language, process, program_env, gate):
+        """The program in its box, as the run's process, registered before it starts."""
         directory = settings.RUNS_DIR / str(run_id)
         uid = self.isolation.uid(run_id, str(settings.DATA_DIR))
         token = secrets.token_urlsafe(24)
@@ -432,28 +428,21 @@ class RobotAgent:
         env = launcher.environment(
             language, self.isolation.home(), extra, clients_dir=self.isolation.clients()
         )
-        argv = launcher.command(
-            language, self.isolation.home() / message["filename"], limits,
-            message.get("args", ()), isolation=self.isolation, uid=uid,
-            socket_dir=self.socket_dir, box_args=box.args(),
+        program = self.isolation.home() / message["filename"]
+        argv = [*language.command(str(program)), *map(str, message.get("args", ()))]
+        launch = Launch(
+            message["filename"], message["source"].encode(),
+            self.isolation.program_command(argv, uid), env,
         )  # fmt: skip
-        process = RunProcess(
-            argv,
-            env=env,
-            cwd=directory,
-            log_path=directory / "output.log",
-            on_output=partial(self._publish_output, run_id),
-            max_log_bytes=limits.log_size_mb * 1024 * 1024,
-            grace=float(self.limits["stop_grace_seconds"]),
-            watch=RunWatch(limits, box),
-            box=box,
-        )
         # The token is good before the program starts: it may call auth at once.
         active = ActiveRun(run_id, token, process, user=message.get("user", ""))
         self.runs[run_id] = active
         self.tokens[token] = active
         try:
-            await process.start(gate)
+            await process.begin(
+                launch, gate, log_path=directory / "output.log",
+                on_output=partial(self._publish_output, run_id),
+            )  # fmt: skip
         except BaseException:
             self.runs.pop(run_id, None)
             self.tokens.pop(token, None)
@@ -461,31 +450,67 @@ class RobotAgent:
         active.watcher = asyncio.create_task(self._watch(active))
         return active
 
-    def _cgroup(self, run_id: int, limits: launcher.Limits) -> cgroups.RunCgroup | None:
+    def _box_ahead(self, now: bool = False) -> None:
+        if self.isolation is not None:
+            self.boxes.soon(self._box_kind(self.gateway.program_env()), now)
+
+    def _box_kind(self, program_env: dict) -> "BoxKind":
+        limits = launcher.Limits.from_settings(self.limits)
+        services: list[str] = []
+        if self.isolation.network != "none":
+            services = [f"tcp:{ROBOT_API_PORT}", *self.isolation.policy.loopback_ports]
+            if "ROBOT_MAVLINK" in program_env:  # udpout:127.0.0.1:PORT, the programs' endpoint
+                services.append(f"udp:{program_env['ROBOT_MAVLINK'].rsplit(':', 1)[1]}")
+        grace = float(self.limits["stop_grace_seconds"])
+        return BoxKind(self.isolation, limits, tuple(dict.fromkeys(services)), grace)
+
+    def _make_box(self, name: str, kind: "BoxKind") -> RunProcess:
+        """A run's box, not spawned yet: bubblewrap (or the rootless inbox) and its cgroup."""
+        cgroup = self._cgroup(name, kind.limits)
+        try:
+            box = make_box(
+                kind.isolation,
+                socket_dir=self.socket_dir,
+                disk_mb=kind.limits.disk_mb,
+                listeners=[self._listener(service) for service in kind.services],
+                seccomp_fd=seccomp.open_filter_fd(),
+                cgroup=cgroup,
+                rlimits=kind.limits.rlimits(address_space=cgroup is None),
+            )
+        except BaseException:
+            if cgroup is not None:
+                cgroup.remove()
+            raise
+        settings.RUNS_DIR.mkdir(parents=True, exist_ok=True)
+        return RunProcess(
+            box.command(),
+            env={"PATH": SYSTEM_PATH},  # the program's own comes with its run (Launch)
+            cwd=settings.RUNS_DIR,
+            max_log_bytes=kind.limits.log_size_mb * MB,
+            grace=kind.grace,
+            watch=RunWatch(kind.limits, box),
+            box=box,
+        )
+
+    def _cgroup(self, name: str, limits: launcher.Limits) -> cgroups.RunCgroup | None:
         """The run's cgroup, where this machine gives one (else rlimits alone, as shown on the
         robot's page); one that cannot be made refuses the run."""
         if not self.cgroups.available:
             return None
         try:
             return cgroups.RunCgroup.create(
-                f"{self.cgroup_prefix}run-{run_id}", self.cgroups,
+                name, self.cgroups,
                 memory_bytes=limits.memory_mb * MB, pids=limits.processes,
                 cpu_percent=limits.cpu_percent, cpu_seconds=limits.cpu_seconds,
             )  # fmt: skip
         except (cgroups.CgroupError, OSError) as exc:
             raise IsolationUnavailable(f"its cgroup could not be made: {exc}") from None
 
-    def _listeners(self, program_env: dict) -> list[Listener]:
+    def _listener(self, service: str) -> Listener:
         """What the run's robot gives programs on 127.0.0.1 inside the run's namespace."""
-        if self.isolation.network == "none":
-            return []
-        listeners = [Listener(f"tcp:{ROBOT_API_PORT}", self.server.serve_socket)]
-        services = list(self.isolation.policy.loopback_ports)
-        if "ROBOT_MAVLINK" in program_env:  # udpout:127.0.0.1:PORT, the programs' endpoint
-            services.append(f"udp:{program_env['ROBOT_MAVLINK'].rsplit(':', 1)[1]}")
-        for service in dict.fromkeys(services):
-            listeners.append(Listener(service, partial(relay_to_host, service)))
-        return listeners
+        if service == f"tcp:{ROBOT_API_PORT}":
+            return Listener(service, self.server.serve_socket)
+        return Listener(service, partial(relay_to_host, service))
 
     async def _watch(self, active: ActiveRun) -> None:
         outcome = await active.process.wait()
@@ -499,6 +524,8 @@ class RobotAgent:
         await active.process.box.close()
         if outcome.state != NOT_OURS:  # else lost or failed meanwhile: its state stays
             await self._end_run(active.run_id, outcome.state, outcome.exit_code, outcome.reason)
+        if not self.runs:  # the robot's next run finds its box made
+            self._box_ahead(now=True)
 
     async def _end_run(self, run_id, state, exit_code, reason) -> None:
         await database_sync_to_async(Run.mark_ended)(run_id, state, exit_code, reason)

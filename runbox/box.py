@@ -1,21 +1,27 @@
-"""One run's box, from bubblewrap's start to the run's end.
+"""One run's box, made before its run is known and handed the program when the run starts.
 
 bubblewrap writes the sandbox's first process and its namespaces to ``--info-fd`` and then
-waits on ``--block-fd``. Meanwhile the agent puts that process in the run's cgroup (all the
-program's processes are born inside it), opens in the run's network namespace the sockets its
-robot gives programs, and starts the NAT of a `full` run. Only then does the program start.
+waits on ``--block-fd``. Meanwhile the agent puts that process in the box's cgroup (all the
+program's processes are born inside it), opens in the box's network namespace the sockets its
+robot gives programs, and starts the NAT of a `full` run (``prepare``). The sandbox then runs
+a shell that waits for its script: the program's file and command come with the run (``go``).
+An agent keeps one box prepared ahead per robot, so that a run's start costs only the last
+step: the namespaces, the cgroup and the sockets are made while nobody waits.
 
 The sandbox's first process is pid 1 of the run's pid namespace: killing it ends every
 process of the run at once, whatever they did to hide (setsid, double fork, ignored signals).
 """
 
 import asyncio
+import base64
 import contextlib
 import inspect
 import json
 import logging
 import os
+import re
 import resource
+import shlex
 import signal
 import socket
 import sys
@@ -51,6 +57,42 @@ async def _pass(gate) -> None:
 
 
 @dataclass(frozen=True)
+class Launch:
+    """What a box runs once its run starts: the program's file in the run's folder, and the
+    command line and environment that run it (as root, setpriv into the run's account first)."""
+
+    filename: str
+    source: bytes
+    argv: list[str]
+    env: dict[str, str]
+
+
+ENV_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def shell_script(launch: Launch, home: Path) -> bytes:
+    """The waiting shell's script (it runs as the box's root, before the run's account):
+    stdin from /dev/null again, the program's file, the run's environment and nothing else
+    (dash would add PWD), then the program."""
+    bad = [name for name in launch.env if not ENV_NAME.fullmatch(name)]
+    if bad:
+        raise ValueError(f"not an environment variable's name: {bad[0]!r}")
+    if b"\0" in launch.source:
+        raise ValueError("a program's text cannot hold NUL bytes")
+    source = shlex.quote(launch.source.decode("utf-8", "surrogateescape"))
+    lines = [
+        "exec </dev/null",
+        f"printf '%s' {source} >{shlex.quote(str(home / launch.filename))} || exit 126",
+    ]
+    if "PWD" not in launch.env:
+        lines.append("unset PWD")
+    if launch.env:
+        lines.append("export " + " ".join(f"{k}={shlex.quote(v)}" for k, v in launch.env.items()))
+    lines.append("exec " + shlex.join(launch.argv))
+    return ("\n".join(lines) + "\n").encode("utf-8", "surrogateescape")
+
+
+@dataclass(frozen=True)
 class Listener:
     """A service on the run's 127.0.0.1: "tcp:PORT" or "udp:PORT", and what serves the socket
     made for it there (returns something with ``async close()``)."""
@@ -60,14 +102,13 @@ class Listener:
 
 
 class Box:
-    """What every box has: the program's file, its sockets, its processes, its end."""
+    """What every box has: its sockets, its processes, its end; the program comes with go()."""
 
     def __init__(
         self,
         in_force: InForce,
         *,
-        source: bytes,
-        filename: str,
+        socket_dir: Path,
         disk_mb: int,
         listeners: list[Listener] = (),
         cgroup=None,
@@ -75,23 +116,33 @@ class Box:
         rlimits: dict[int, tuple[int, int]] | None = None,
     ):
         """`rlimits`: each of the run's processes' own limits (resource.RLIMIT_*), set on the
-        box's first process before the program starts; `cgroup`: a runbox.cgroups.RunCgroup
-        that the box's first process joins then."""
+        box's first process before anything runs in it; `cgroup`: a runbox.cgroups.RunCgroup
+        that the box's first process joins then; `socket_dir`: the Robot API's socket folder."""
         self.in_force, self.listeners, self.cgroup = in_force, list(listeners), cgroup
+        self.socket_dir = socket_dir
         self.rlimits = rlimits or {}
-        self.filename = filename
-        self.program_fd = os.memfd_create("program", 0)
-        os.write(self.program_fd, source)
-        os.lseek(self.program_fd, 0, os.SEEK_SET)
         self.seccomp_fd = seccomp_fd
         # Closed once done with, or at close() whatever happened in between.
-        self._fds = {self.program_fd} | ({seccomp_fd} if seccomp_fd is not None else set())
+        self._fds = {seccomp_fd} if seccomp_fd is not None else set()
         self.disk_mb = disk_mb
         self.init_pid: int | None = None
         self.pidns: int | None = None
         self.served: list = []
         self.nat: asyncio.subprocess.Process | None = None
         self._joining: asyncio.Future | None = None  # the processes joining the cgroup
+        self.launched = False
+
+    def stdin(self) -> int | None:
+        """What its first process reads (None: /dev/null)."""
+        return None
+
+    async def _enter_cgroup(self, wait: bool) -> None:
+        if self.cgroup is None:
+            return
+        if wait:
+            await asyncio.to_thread(self.gather)
+        else:
+            self._join_cgroup()
 
     def _join_cgroup(self) -> None:
         """The run's processes join its cgroup, in a thread, while the program starts.
@@ -195,7 +246,7 @@ class Box:
 
 class BwrapBox(Box):
     """The box of an agent that is root: bubblewrap makes it, the agent opens its sockets
-    from outside (runbox.netns) between bubblewrap's start and the program's."""
+    from outside (runbox.netns); a shell in it waits for its script on its stdin."""
 
     # -- before the start -----------------------------------------------------------------
 
@@ -203,35 +254,58 @@ class BwrapBox(Box):
         super().__init__(in_force, **options)
         self.info_r, self.info_w = os.pipe()
         self.block_r, self.block_w = os.pipe()
+        self.script_r, self.script_w = os.pipe()
         self._fds |= {self.info_r, self.info_w, self.block_r, self.block_w}
+        self._fds |= {self.script_r, self.script_w}
 
-    def args(self) -> list[str]:
+    def command(self) -> list[str]:
+        """bubblewrap, then a shell that reads its script (the run's) from its stdin."""
         args = ["--info-fd", str(self.info_w), "--block-fd", str(self.block_r)]
         if self.seccomp_fd is not None:
             args += ["--seccomp", str(self.seccomp_fd)]
-        return args + self.in_force.folder_args(self.disk_mb, self.program_fd, self.filename)
+        return [
+            *self.in_force.bwrap(self.socket_dir), *args,
+            *self.in_force.folder_args(self.disk_mb), "--", "/bin/sh", "-c", ". /dev/stdin",
+        ]  # fmt: skip
 
     def pass_fds(self) -> tuple[int, ...]:
-        fds = (self.info_w, self.block_r, self.program_fd)
+        fds = (self.info_w, self.block_r)
         return fds if self.seccomp_fd is None else (*fds, self.seccomp_fd)
 
-    # -- between bubblewrap's start and the program's -------------------------------------
+    def stdin(self) -> int:
+        return self.script_r
 
-    async def open(self, launcher_pid: int, gate=None) -> None:
-        """Once bubblewrap runs: cgroup, sockets, NAT, the gate, then the program starts."""
-        self._close(*self.pass_fds())  # the sandbox has them now
+    # -- between bubblewrap's start and the run's -----------------------------------------
+
+    async def prepare(self, launcher_pid: int, wait_for_cgroup: bool = True) -> None:
+        """Once bubblewrap runs: limits, cgroup, sockets, NAT; then its shell may wait.
+        `wait_for_cgroup` False: the run's processes join its cgroup while they start."""
+        self._close(*self.pass_fds(), self.script_r)  # the sandbox has them now
         info = await self._read_info()
         self.init_pid, self.pidns = info["child-pid"], info["pid-namespace"]
         for limit, values in self.rlimits.items():
             resource.prlimit(self.init_pid, limit, values)
-        self._join_cgroup()
+        await self._enter_cgroup(wait_for_cgroup)
         if self.in_force.network != "none":
             await self._open_loopback()
         if self.in_force.network == "full":
             await self._open_nat()
-        await _pass(gate)
         os.write(self.block_w, b"go")
         self._close(self.block_w)
+
+    async def go(self, launch: Launch, gate=None) -> None:
+        """The run's program: its file and command, to the waiting shell."""
+        try:
+            script = shell_script(launch, self.in_force.HOME)
+            await _pass(gate)
+            self.launched = True
+            view = memoryview(script)
+            while view:  # the shell reads as it goes: a long script does not block for long
+                view = view[os.write(self.script_w, view) :]
+        except BrokenPipeError:
+            raise BoxFailed("the box ended before its program could start") from None
+        finally:
+            self._close(self.script_w)
 
     async def _read_info(self) -> dict:
         loop = asyncio.get_running_loop()
@@ -292,25 +366,24 @@ class BwrapBox(Box):
 
 class RootlessBox(Box):
     """The box of an agent that is not root: runbox.inbox makes it from the inside and hands
-    the run's sockets over its control socket; the agent answers "go" once it is ready."""
+    the run's sockets over its control socket; the run's program and command follow there."""
 
-    def __init__(self, in_force: InForce, *, socket_dir: Path, **options):
+    def __init__(self, in_force: InForce, **options):
         super().__init__(in_force, **options)
         self.control, theirs = socket.socketpair()
         self.theirs = theirs.detach()
         self._fds.add(self.theirs)
-        self.spec = in_force.inbox_spec(socket_dir, self.disk_mb, self.filename)
+        self.spec = in_force.inbox_spec(self.socket_dir, self.disk_mb)
 
-    def args(self) -> list[str]:
-        return [str(self.theirs)]
+    def command(self) -> list[str]:
+        return [*self.in_force.unshare(), str(self.theirs)]
 
     def pass_fds(self) -> tuple[int, ...]:
-        fds = (self.theirs, self.program_fd)
-        return fds if self.seccomp_fd is None else (*fds, self.seccomp_fd)
+        return (self.theirs,) if self.seccomp_fd is None else (self.theirs, self.seccomp_fd)
 
-    async def open(self, launcher_pid: int, gate=None) -> None:
+    async def prepare(self, launcher_pid: int, wait_for_cgroup: bool = True) -> None:
         spec = {
-            **self.spec, "program_fd": self.program_fd, "seccomp_fd": self.seccomp_fd,
+            **self.spec, "seccomp_fd": self.seccomp_fd,
             "services": [listener.service for listener in self.listeners],
             "rlimits": [[limit, *values] for limit, values in self.rlimits.items()],
         }  # fmt: skip
@@ -319,10 +392,24 @@ class RootlessBox(Box):
             sockets = await asyncio.to_thread(self._handshake, spec)
             self.init_pid = first_child(launcher_pid)
             self.pidns = os.stat(f"/proc/{self.init_pid}/ns/pid").st_ino
-            self._join_cgroup()
+            await self._enter_cgroup(wait_for_cgroup)
             await self._serve(sockets)
+        except BaseException:
+            self.control.close()
+            raise
+
+    async def go(self, launch: Launch, gate=None) -> None:
+        try:
             await _pass(gate)
-            self.control.sendall(b"go\n")
+            self.launched = True
+            run = {
+                "filename": launch.filename, "argv": launch.argv, "env": launch.env,
+                "source": base64.b64encode(launch.source).decode(),
+            }  # fmt: skip
+            try:
+                self.control.sendall(json.dumps({"go": run}).encode() + b"\n")
+            except OSError:
+                raise BoxFailed("the box ended before its program could start") from None
         finally:
             self.control.close()
 
@@ -360,8 +447,6 @@ def first_child(pid: int) -> int:
     raise BoxFailed("the run's box did not start")
 
 
-def make_box(in_force: InForce, *, socket_dir: Path, **options) -> Box:
+def make_box(in_force: InForce, **options) -> Box:
     """The box a run gets here: made by bubblewrap and the agent as root, else from inside."""
-    if in_force.rootless:
-        return RootlessBox(in_force, socket_dir=socket_dir, **options)
-    return BwrapBox(in_force, **options)
+    return (RootlessBox if in_force.rootless else BwrapBox)(in_force, **options)

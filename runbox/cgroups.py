@@ -14,6 +14,7 @@ read from /proc/self/cgroup and /proc/self/mountinfo.
                               pids=64, cpu_percent=100, cpu_seconds=600)
         argv = cg.command(argv)     # the run's first process joins before it execs anything
         cg.add(pid)                 # or: move a process that has not started the program yet
+        cg.rename(f"{agent}-run-{other}")  # a box made ahead, taken by a run
         cg.usage()                  # CgroupUsage: memory now/peak, CPU seconds, processes
         cg.met()                    # {"memory": "memory limit (1024 MB) reached", ...}
         cg.kill()                   # every process of the run, forks included
@@ -337,6 +338,22 @@ class RunCgroup:
 
     def folders(self) -> list[Path]:
         return sorted(set(self.dirs.values()))
+
+    def rename(self, name: str) -> None:
+        """Call it `name` from now on, processes and all (a box made ahead takes its run's
+        name). A rename is no move: nothing waits for the kernel. Raises CgroupError."""
+        if not name or "/" in name or name.startswith("."):
+            raise CgroupError(f"bad cgroup name {name!r}")
+        done = []
+        try:
+            for folder in self.folders():
+                done.append(folder.rename(folder.with_name(name)))
+        except OSError as e:
+            for renamed in done:  # all its hierarchies keep one name
+                renamed.rename(renamed.with_name(self.name))
+            raise CgroupError(f"cannot rename the cgroup {self.name} to {name}: {e}") from e
+        self.name = name
+        self.dirs = {c: base / name for c, base in self.support.bases.items()}
 
     def command(self, argv: list[str]) -> list[str]:
         """`argv`, started so that it joins this cgroup before it execs: every process of the

@@ -7,14 +7,18 @@ there, and nowhere else), mount, pid, network, ipc and uts namespaces. It then
 1. reads the box's spec from the agent on the control socket (fd given as argv[1]);
 2. builds the run's filesystem on a tmpfs and pivots into it: /usr, /etc and the libraries
    read-only, the Robot API clients and socket, /proc of the run's pid namespace, a few
-   devices, a /tmp of `tmp_mb` and the run's folder, a tmpfs of `disk_mb` with the program;
+   devices, a /tmp of `tmp_mb` and the run's folder, a tmpfs of `disk_mb`;
 3. binds the run's 127.0.0.1 services and hands their sockets to the agent, then waits for
-   its go (by then the agent has put this process in the run's cgroup, where it has one);
-4. enters a nested user namespace where the run is uid 1000 and nothing more, applies the
-   seccomp filter, forks the program and stays as the pid namespace's init: it reaps, and
-   exits as the program did (128 + N for a signal, as bubblewrap reports it).
+   its go, which brings the run's program, command line and environment (by then the agent
+   has put this process in the run's cgroup, where it has one; the box may wait long: the
+   agent makes one ahead of its runs);
+4. writes the program into the run's folder, enters a nested user namespace where the run
+   is uid 1000 and nothing more, applies the seccomp filter, forks the program and stays as
+   the pid namespace's init: it reaps, and exits as the program did (128 + N for a signal,
+   as bubblewrap reports it).
 """
 
+import base64
 import ctypes
 import json
 import os
@@ -79,7 +83,7 @@ def tmpfs(target: str, size_mb: int, mode: str) -> None:
     mount("tmpfs", target, "tmpfs", MS_NOSUID | MS_NODEV, f"size={size_mb}m,mode={mode}")
 
 
-def build_root(spec: dict, program: bytes) -> None:
+def build_root(spec: dict) -> None:
     mount("none", "/", None, MS_REC | MS_PRIVATE)
     links = {p: os.readlink(p) for p in spec["readonly"] if os.path.islink(p)}
     readonly = [Source(p) for p in spec["readonly"] if p not in links and os.path.exists(p)]
@@ -99,10 +103,7 @@ def build_root(spec: dict, program: bytes) -> None:
         os.symlink(target, f"{ROOT}/dev/{name}")
     tmpfs(ROOT + "/dev/shm", spec["tmp_mb"], "1777")
     tmpfs(ROOT + "/tmp", spec["tmp_mb"], "1777")
-    home = ROOT + spec["home"]
-    tmpfs(home, spec["disk_mb"], "1777")
-    with open(os.path.join(home, spec["filename"]), "wb") as file:
-        file.write(program)
+    tmpfs(ROOT + spec["home"], spec["disk_mb"], "1777")
     os.makedirs(ROOT + "/proc", exist_ok=True)
     mount("proc", ROOT + "/proc", "proc", MS_NOSUID | MS_NODEV | MS_NOEXEC)
     os.makedirs(ROOT + "/.old", exist_ok=True)
@@ -164,6 +165,15 @@ def apply_seccomp(program: bytes) -> None:
               "seccomp")  # fmt: skip
 
 
+def write_program(home: str, run: dict) -> None:
+    name = run["filename"]
+    if not name or "/" in name or name in (".", ".."):
+        raise OSError(f"not a plain file name: {name!r}")
+    fd = os.open(os.path.join(home, name), os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+    with open(fd, "wb") as file:
+        file.write(base64.b64decode(run["source"]))
+
+
 def read_fd(fd: int) -> bytes:
     chunks = []
     while chunk := os.read(fd, 1 << 16):
@@ -184,12 +194,10 @@ def serve_as_init(child: int) -> int:
 def main() -> int:
     control = socket.socket(fileno=int(sys.argv[1]))
     control.setblocking(True)  # whatever the file's flags came as
-    argv = sys.argv[sys.argv.index("--") + 1 :]
     reader = control.makefile("rb")
     spec = json.loads(reader.readline())
-    program = read_fd(spec["program_fd"])
     seccomp = read_fd(spec["seccomp_fd"]) if spec.get("seccomp_fd") is not None else b""
-    build_root(spec, program)
+    build_root(spec)
     socket.sethostname("robot")  # its own uts namespace: the host's name is not its business
     sockets = bind_services(spec["services"])
     fds = [s.fileno() for s in sockets]
@@ -198,10 +206,14 @@ def main() -> int:
     for sock in sockets:
         sock.close()
     answer = reader.readline()
-    if answer != b"go\n":
-        print(f"robotide: the agent did not let the run start ({answer!r})", file=sys.stderr)
+    try:
+        run = json.loads(answer)["go"]
+        argv, env = [str(a) for a in run["argv"]], {str(k): str(v) for k, v in run["env"].items()}
+    except (ValueError, KeyError, TypeError, AttributeError):
+        print(f"robotide: the agent did not let the run start ({answer[:80]!r})", file=sys.stderr)
         return 125
     control.close()
+    write_program(spec["home"], run)
     become_the_run()
     os.chdir(spec["home"])
     child = os.fork()
@@ -210,7 +222,7 @@ def main() -> int:
             for limit, soft, hard in spec["rlimits"]:
                 resource.setrlimit(limit, (soft, hard))
             apply_seccomp(seccomp)
-            os.execvp(argv[0], argv)
+            os.execvpe(argv[0], argv, env)
         except OSError as exc:
             print(f"robotide: cannot start {argv[0]}: {exc}", file=sys.stderr)
         os._exit(127)

@@ -157,16 +157,16 @@ class InForce:
     def uid(self, run_id: int, instance: str) -> int:
         return ROOTLESS_UID if self.rootless else run_uid(run_id, instance)
 
-    def wrap(self, argv: list[str], uid: int, socket_dir: Path, box_args: list[str]) -> list[str]:
-        """The command inside its box. bubblewrap runs first, as the server's account, so it
-        can mount what the run may see; as root, setpriv inside drops to the run's account."""
-        if self.rootless:  # the box's first process does it all from inside (runbox.inbox)
-            return [*self.unshare(), *box_args, "--", *argv]
+    def program_command(self, argv: list[str], uid: int) -> list[str]:
+        """What the box runs for the program. As root, setpriv drops to the run's account
+        first; rootless, the box's first process has made it uid 1000 already."""
+        if self.rootless:
+            return list(argv)
         account = [
             tool("setpriv"), f"--reuid={uid}", f"--regid={uid}", "--clear-groups",
             "--no-new-privs", "--",
         ]  # fmt: skip
-        return [*self.bwrap(socket_dir), *box_args, "--", *account, *argv]
+        return [*account, *argv]
 
     def unshare(self) -> list[str]:
         """Rootless: util-linux makes the namespaces (it is on every Debian machine), the
@@ -178,12 +178,12 @@ class InForce:
             SYSTEM_PYTHON, "-I", "-S", str(INBOX),
         ]  # fmt: skip
 
-    def inbox_spec(self, socket_dir: Path, disk_mb: int, filename: str) -> dict:
+    def inbox_spec(self, socket_dir: Path, disk_mb: int) -> dict:
         readonly = ["/usr", "/etc", *(f"/{top}" for top in TOPS)]
         return {
             "readonly": readonly, "clients": str(self.clients_dir),
             "clients_at": str(self.CLIENTS), "api_dir": str(socket_dir),
-            "api_at": str(self.API_DIR), "home": str(self.HOME), "filename": filename,
+            "api_at": str(self.API_DIR), "home": str(self.HOME),
             "tmp_mb": self.policy.tmp_mb, "disk_mb": disk_mb,
         }  # fmt: skip
 
@@ -208,12 +208,11 @@ class InForce:
                 args += ["--ro-bind", str(path), str(path)]
         return args
 
-    def folder_args(self, disk_mb: int, program_fd: int, filename: str) -> list[str]:
-        """The run's folder: a tmpfs of `disk_mb` with the program in it, where it starts."""
+    def folder_args(self, disk_mb: int) -> list[str]:
+        """The run's folder: a tmpfs of `disk_mb`, where it starts (the program comes later)."""
         home = str(self.HOME)
         return [
             "--perms", "1777", "--size", str(disk_mb * 1024 * 1024), "--tmpfs", home,
-            "--perms", "0644", "--file", str(program_fd), f"{home}/{filename}",
             "--chdir", home,
         ]  # fmt: skip
 

@@ -1,10 +1,11 @@
 """The launcher: the paper's "wrapper script", as a command line built for each run.
 
-A run is started as ``bwrap <box> -- setpriv <run's account> -- prlimit <limits> --
-<interpreter> <file>``: each tool sets its part and execs the next, so the box, the account
-and the limits are in place before any of the program's code runs (see runbox.isolation and
-runbox.box). The supervisor adds a new session and the clean environment built here, and
-enforces what the kernel does not: wall-clock time and output size.
+A run is started as ``bwrap <box> -- sh`` (its box, made ahead, see runbox.box), then the
+shell execs ``setpriv <run's account> -- <interpreter> <file>``: each tool sets its part and
+execs the next, so the box, the account and the limits are in place before any of the
+program's code runs (see runbox.isolation and runbox.box). The supervisor adds a new session
+and the clean environment built here, and enforces what the kernel does not: wall-clock time
+and output size.
 """
 
 import resource
@@ -13,7 +14,6 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 from runbox import SYSTEM_PATH
-from runbox.isolation import InForce
 
 MB = 1024 * 1024
 
@@ -69,24 +69,12 @@ def _tool(name: str) -> str:
     return path
 
 
-def command(
-    language,
-    program_file: Path,
-    limits: Limits,
-    args=(),
-    isolation: InForce | None = None,
-    uid: int | None = None,
-    socket_dir: Path | None = None,
-    box_args: list[str] = (),
-) -> list[str]:
-    """The run's command line; without `isolation` (tests of the supervisor) it stays as is.
-    In a box, `program_file` is where the program lies inside it, and the box sets the
-    limits of its first process before the program starts (no prlimit to exec)."""
+def command(language, program_file: Path, limits: Limits, args=()) -> list[str]:
+    """A program's command line outside a box (the supervisor's own tests): setpriv and
+    prlimit set its limits. A boxed run's is InForce.program_command, run by its box."""
     argv = [*language.command(str(program_file)), *map(str, args)]
-    if isolation is None:
-        prlimit = [_tool("prlimit"), *limits.prlimit_args(), "--"]
-        return [_tool("setpriv"), "--pdeathsig", "KILL", "--", *prlimit, *argv]
-    return isolation.wrap(argv, uid, socket_dir, list(box_args))
+    prlimit = [_tool("prlimit"), *limits.prlimit_args(), "--"]
+    return [_tool("setpriv"), "--pdeathsig", "KILL", "--", *prlimit, *argv]
 
 
 def environment(

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from subprocess import DEVNULL, PIPE
 
-from runbox.box import NotStarted
+from runbox.box import BoxFailed, NotStarted
 from runbox.watch import RunWatch
 
 STDOUT, STDERR, SYSTEM = b"o", b"e", b"s"
@@ -61,18 +61,19 @@ class RunProcess:
         *,
         env: dict[str, str],
         cwd: Path,
-        log_path: Path,
-        on_output: OutputCallback,
+        log_path: Path | None = None,
+        on_output: OutputCallback | None = None,
         max_log_bytes: int = 64 * 1024 * 1024,
         grace: float = 3.0,
         batch_interval: float = 0.1,
         watch: RunWatch | None = None,
         box=None,
     ):
-        """`box`: the run's box (runbox.box.Box), which bubblewrap makes around the program:
-        set up between bubblewrap's start and the program's, signalled as a whole, and
-        reporting the program's death by signal N as 128 + N. `watch`: what it samples.
-        """
+        """`box`: the run's box (runbox.box.Box), whose command `argv` is: prepared before
+        the run is known, given its program by begin(), signalled as a whole, reporting the
+        program's death by signal N as 128 + N. `log_path` and `on_output` may come with
+        begin(); what the process says before then waits for the log. `watch`: what it
+        samples."""
         self.argv, self.env, self.cwd, self.log_path = argv, env, cwd, log_path
         self.watch, self.box = watch, box
         self.wrapped = box is not None
@@ -86,6 +87,8 @@ class RunProcess:
         self.returncode: int | None = None
         self.lines_written = 0
         self._partial = {1: b"", 2: b""}
+        self._log = None
+        self._early: list[tuple[bytes, list[bytes], bool]] = []  # said before the log opened
         self._written = 0
         self._capped = False
         self._pending: list[tuple[int, bytes]] = []
@@ -100,21 +103,26 @@ class RunProcess:
         self._stop_state = "stopped"
         self._done: asyncio.Future | None = None
 
-    async def start(self, gate=None) -> int:
-        """Spawn the program. `gate`: a coroutine function the box awaits just before the
-        program may run (its set-up done meanwhile); None lets it run, (state, reason) ends
-        it there as NotStarted."""
+    async def start(self, gate=None, launch=None) -> int:
+        """Spawn and begin at once (see both)."""
+        await self.spawn(wait_for_cgroup=False)
+        await self.begin(launch, gate)
+        return self.pid
+
+    async def spawn(self, wait_for_cgroup: bool = True) -> int:
+        """The OS process: with a box, the box, prepared and waiting for its run (begin());
+        without one, the program itself. A box that cannot be prepared ends the process,
+        and the run fails saying why. `wait_for_cgroup` False: a box's processes join its
+        cgroup while the program starts (a start that is waited for)."""
         loop = asyncio.get_running_loop()
         self._done = loop.create_future()
-        self.log_path.parent.mkdir(parents=True, exist_ok=True)
-        # Buffered writes to a local file; flushed with every live batch so readers see whole lines.
-        self._log = open(self.log_path, "ab", buffering=1 << 20)  # noqa: SIM115
-        self._written = self._log.tell()
+        if self.log_path is not None:
+            self._open_log()
         try:
             await loop.subprocess_exec(
                 lambda: _Protocol(self),
                 *self.argv,
-                stdin=DEVNULL,
+                stdin=self.box.stdin() if self.box and self.box.stdin() is not None else DEVNULL,
                 stdout=PIPE,
                 stderr=PIPE,
                 cwd=self.cwd,
@@ -125,25 +133,57 @@ class RunProcess:
                 pass_fds=self.box.pass_fds() if self.box else (),
             )
         except OSError:
-            self._log.close()
+            if self._log is not None:
+                self._log.close()
             raise
         if self.box is not None:
             try:
-                await self.box.open(self.pid, gate)
+                await self.box.prepare(self.pid, wait_for_cgroup)
+            except Exception as exc:  # nothing of a program runs: the run fails, saying why
+                self._fail(f"could not start: {exc}", f"its box could not be made: {exc}")
+        return self.pid
+
+    async def begin(self, launch=None, gate=None, *, log_path=None, on_output=None) -> None:
+        """The run begins: its log, then (with a box) its program. `gate`: a coroutine
+        function awaited just before the program may run; None lets it run, (state, reason)
+        ends it there as NotStarted. `launch`: runbox.box.Launch, what the box runs."""
+        self.log_path = log_path or self.log_path
+        self.on_output = on_output or self.on_output
+        if self._log is None:
+            self._open_log()
+        if self.box is None:
+            self.started = True
+        elif not self.running:
+            raise BoxFailed("its box ended before the run began")
+        elif not self.stop_requested:
+            try:
+                await self.box.go(launch, gate)
             except NotStarted as refused:  # whoever started it no longer wants it to run
                 self._stop_state, self._stop_reason = refused.args
                 self._signal_group(signal.SIGKILL)
-            except Exception as exc:  # the program never starts: the run fails, saying why
-                self.system_line(f"its box could not be made: {exc}")
-                self._stop_reason, self._stop_state = f"could not start: {exc}", "failed"
-                self._signal_group(signal.SIGKILL)
+            except Exception as exc:
+                self._fail(f"could not start: {exc}", f"its program could not start: {exc}")
             else:
                 self.started = True
-        else:
-            self.started = True
-        if self.watch is not None:
-            self._watcher = loop.create_task(self.watch.run(self._limit_reached))
-        return self.pid
+        if self.watch is not None and self.running:
+            self._watcher = asyncio.get_running_loop().create_task(
+                self.watch.run(self._limit_reached)
+            )
+
+    def _open_log(self) -> None:
+        self.log_path.parent.mkdir(parents=True, exist_ok=True)
+        # Buffered writes to a local file; flushed with every live batch so readers see whole lines.
+        self._log = open(self.log_path, "ab", buffering=1 << 20)  # noqa: SIM115
+        self._written = self._log.tell()
+        early, self._early = self._early, []
+        for tag, lines, force in early:
+            self._append(tag, lines, force)
+
+    def _fail(self, reason: str, line: str) -> None:
+        if self.running:
+            self.system_line(line)
+        self._stop_reason, self._stop_state = reason, "failed"
+        self._signal_group(signal.SIGKILL)
 
     @property
     def stop_requested(self) -> bool:
@@ -201,6 +241,10 @@ class RunProcess:
             self._partial[fd] = b""
 
     def _append(self, tag: bytes, lines: list[bytes], force: bool = False) -> None:
+        if self._log is None:  # a box that has no run yet: at most a few lines of its own
+            if len(self._early) < 100:
+                self._early.append((tag, lines, force))
+            return
         if self._capped and not force:
             return
         prefix = tag + b" "
@@ -240,7 +284,7 @@ class RunProcess:
         # From when the batch was due, not when the timer ran (a little late each time): else
         # a program printing once an interval finds each batch due later and later.
         self._last_flush = min(self._flush_due, time.monotonic())
-        if self._log.closed:
+        if self._log is None or self._log.closed:
             return
         self._log.flush()
         pending, skipped, skipped_from = self._pending, self._skipped, self._live_end
@@ -298,7 +342,8 @@ class RunProcess:
         if self._flush_handle is not None:
             self._flush_handle.cancel()
         self._flush()
-        self._log.close()
+        if self._log is not None:
+            self._log.close()
         self._transport.close()
         self._done.set_result(None)
 

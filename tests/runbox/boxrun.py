@@ -2,6 +2,9 @@
 
     python3 boxrun.py '{"source": "...", "network": "loopback", "limits": {...}}'
 
+More: "args" (the program's), "ahead" (seconds the box waits, made, before its run is
+given), "refuse" (the gate's answer), "stop_after", "grace".
+
 Standard library and runbox only, so that an ordinary user's python3 runs it too (the
 rootless box); the Robot API is stood in for by a TCP echo on the run's 127.0.0.1:7010.
 """
@@ -17,8 +20,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from runbox import launcher, seccomp  # noqa: E402
-from runbox.box import Listener, make_box  # noqa: E402
+from runbox import SYSTEM_PATH, launcher, seccomp  # noqa: E402
+from runbox.box import Launch, Listener, make_box  # noqa: E402
 from runbox.isolation import Policy  # noqa: E402
 from runbox.supervisor import RunProcess  # noqa: E402
 from runbox.watch import RunWatch  # noqa: E402
@@ -52,18 +55,18 @@ async def run(spec: dict) -> dict:
     limits = launcher.Limits.from_settings(spec.get("limits", {}))
     listeners = [] if policy.network == "none" else [Listener("tcp:7010", Echo().serve)]
     box = make_box(
-        in_force, socket_dir=sockets, source=spec["source"].encode(), filename="main.py",
-        disk_mb=limits.disk_mb, listeners=listeners, seccomp_fd=seccomp.open_filter_fd(),
-        rlimits=limits.rlimits(),
+        in_force, socket_dir=sockets, disk_mb=limits.disk_mb, listeners=listeners,
+        seccomp_fd=seccomp.open_filter_fd(), rlimits=limits.rlimits(),
     )  # fmt: skip
-    argv = launcher.command(
-        PYTHON, in_force.home() / "main.py", limits, isolation=in_force,
-        uid=in_force.uid(int(time.time()) % 100_000, str(folder)), socket_dir=sockets,
-        box_args=box.args(),
-    )  # fmt: skip
+    argv = in_force.program_command(
+        ["/usr/bin/python3", str(in_force.home() / "main.py"), *spec.get("args", ())],
+        in_force.uid(int(time.time()) % 100_000, str(folder)),
+    )
+    env = launcher.environment(PYTHON, in_force.home(), {})
+    launch = Launch("main.py", spec["source"].encode(), argv, env)
     lines = []
     process = RunProcess(
-        argv, env=launcher.environment(PYTHON, in_force.home(), {}), cwd=folder,
+        box.command(), env={"PATH": SYSTEM_PATH}, cwd=folder,
         log_path=folder / "output.log", on_output=lambda batch, *_: lines.extend(batch),
         watch=RunWatch(limits, box), box=box, grace=float(spec.get("grace", 1.0)),
     )  # fmt: skip
@@ -72,7 +75,12 @@ async def run(spec: dict) -> dict:
     async def gate():  # what the agent's claim of the run says, just before the program runs
         return ("stopped", spec["refuse"]) if spec.get("refuse") else None
 
-    await process.start(gate)
+    if spec.get("ahead"):  # the box made first, the run given to it later (as the agent does)
+        await process.spawn()
+        await asyncio.sleep(spec["ahead"])
+        await process.begin(launch, gate)
+    else:
+        await process.start(gate, launch)
     if spec.get("stop_after"):
         await asyncio.sleep(spec["stop_after"])
         process.stop()

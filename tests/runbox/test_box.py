@@ -141,3 +141,32 @@ def test_a_gate_that_says_no_keeps_the_program_from_running(mode, readable_copy)
     assert "RAN" not in result["log"] and result["left"] == []
     ran = box_run(mode, readable_copy, source)
     assert ran["state"] == "finished" and "RAN" in ran["log"] and ran["started"] is True
+
+
+NASTY = ["$(touch /home/robot/pwned)", "`id`", "it's", 'say "hi"', "two\nlines", "a;b|c&", "*"]
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_box_made_ahead_runs_the_run_given_later_word_for_word(mode, readable_copy):
+    """The box waits, made, for its run: the program, its arguments and its environment come
+    then, and reach the program as they are (nothing of them is read as shell)."""
+    source = """
+import os, sys
+print("ARGS", repr(sys.argv[1:]))
+print("ENV", sorted(os.environ))
+print("FILES", sorted(os.listdir(".")), "PID", os.getpid())
+"""
+    result = box_run(mode, readable_copy, source, ahead=0.5, args=NASTY)
+    log = result["log"]
+    assert result["state"] == "finished", log
+    assert f"ARGS {NASTY!r}" in log, log
+    assert "ENV ['HOME', 'LANG', 'LC_ALL', 'PATH', 'TERM', 'TMPDIR']" in log, log
+    assert "FILES ['main.py'] PID 2" in log, log  # pid 1 is the box's first process
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_box_whose_run_never_comes_ends_with_nothing_left(mode, readable_copy):
+    """A box made ahead and then given up (the robot's settings changed): stopped before its
+    program, it leaves no process behind."""
+    result = box_run(mode, readable_copy, "print('RAN')", ahead=0.3, refuse="settings changed")
+    assert result["started"] is False and "RAN" not in result["log"] and result["left"] == []

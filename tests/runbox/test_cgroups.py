@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from runbox.cgroups import MB, CgroupSupport, RunCgroup, detect, sweep
+from runbox.cgroups import MB, CgroupError, CgroupSupport, RunCgroup, detect, sweep
 
 PREFIX = f"test-{os.getpid()}-"
 SYSTEM_PYTHON = "/usr/bin/python3"  # readable by the unprivileged user of the non-root tests
@@ -223,6 +223,31 @@ def test_add_moves_a_process_in_every_hierarchy(make, support):
             for c in line.split(":")[1].split(",")
         }
         assert inside == set(support.bases)
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+
+
+def test_rename_takes_the_processes_and_limits_along(make, support):
+    """A box made ahead takes its run's name: its processes stay, its limits too."""
+    cg = make(pids=7)
+    sleeper = subprocess.Popen(["sleep", "30"])
+    try:
+        cg.add(sleeper.pid)
+        old = cg.folders()
+        cg.rename(f"{PREFIX}renamed")
+        assert not any(folder.exists() for folder in old)
+        lines = Path(f"/proc/{sleeper.pid}/cgroup").read_text().splitlines()
+        inside = {
+            c for line in lines if line.endswith(f"/{PREFIX}renamed")
+            for c in line.split(":")[1].split(",")
+        }  # fmt: skip
+        assert inside == set(support.bases) and sleeper.pid in cg.members()
+        assert (cg.dirs["pids"] / "pids.max").read_text().strip() == "7"
+        other = make()
+        with pytest.raises(CgroupError):
+            cg.rename(other.name)  # taken: it keeps its name everywhere
+        assert cg.name == f"{PREFIX}renamed" and all(f.exists() for f in cg.folders())
     finally:
         sleeper.kill()
         sleeper.wait()
