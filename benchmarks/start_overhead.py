@@ -24,9 +24,12 @@ $EPOCHREALTIME), which splits the latency into launch (request -> program runnin
 Target: request -> first line on the websocket within 1.2 x the bare start + 15 ms.
 """
 
+import contextlib
+import ctypes
 import json
 import os
 import pwd
+import select
 import subprocess
 import sys
 import tempfile
@@ -53,7 +56,7 @@ from runbox import launcher
 from runbox.isolation import InForce
 
 BENCH = "1 start overhead"
-RUNS = 20
+RUNS = 12
 WARMUP = 2
 RUN_TIMEOUT = 10.0
 END_TIMEOUT = 2.0  # a one-line program that has not ended by then is reported as stuck
@@ -67,8 +70,15 @@ STAGES = ("bare", "bwrap", "bwrap+setpriv", "bwrap+setpriv+prlimit", "box", "ahe
 STAGES_ROOTLESS = ("bare", "box", "ahead")
 
 
+_libc = ctypes.CDLL(None, use_errno=True)
+IN_MODIFY, IN_CREATE, IN_NONBLOCK, IN_CLOEXEC = 0x2, 0x100, 0o4000, 0o2000000
+
+
 class LogWatcher(threading.Thread):
-    """Finds the next run's folder and notes when its log file first holds an output line."""
+    """Finds the next run's folder and notes when its log file first holds an output line.
+
+    Woken by inotify, not by polling: a watcher that polls takes CPU from what it measures
+    (a 0.3 ms poll is 14% of a core here, on a machine of two)."""
 
     def __init__(self, runs: Path, known: set[str], timeout: float = RUN_TIMEOUT):
         super().__init__(daemon=True)
@@ -76,29 +86,45 @@ class LogWatcher(threading.Thread):
         self.seen_at: float | None = None
         self.data = b""
         self.cancel = threading.Event()
+        # Made here, before the request: nothing of the run can come before the watch.
+        runs.mkdir(parents=True, exist_ok=True)
+        self.fd = _libc.inotify_init1(IN_NONBLOCK | IN_CLOEXEC)
+        if self.fd < 0 or self._watch(runs, IN_CREATE) < 0:
+            raise OSError(ctypes.get_errno(), f"inotify on {runs}")
+
+    def _watch(self, path: Path, mask: int) -> int:
+        return _libc.inotify_add_watch(self.fd, str(path).encode(), mask)
 
     def run(self) -> None:
+        try:
+            self._follow()
+        finally:
+            os.close(self.fd)
+
+    def _follow(self) -> None:
         deadline = time.perf_counter() + self.timeout
         log = None
         while not self.cancel.is_set() and time.perf_counter() < deadline:
-            if log is None:
-                try:
-                    new = [n for n in os.listdir(self.runs) if n not in self.known]
-                except FileNotFoundError:
-                    new = []
-                if new:
-                    log = self.runs / new[0] / "output.log"
-            if log is not None:
-                try:
-                    with open(log, "rb") as f:
-                        data = f.read(4096)
-                except FileNotFoundError:
-                    data = b""
-                if data.startswith(b"o ") or b"\no " in data:
-                    self.seen_at = time.perf_counter()
-                    self.data = data
-                    return
-            time.sleep(0.0003)
+            if log is None and (new := [n for n in os.listdir(self.runs) if n not in self.known]):
+                log = self.runs / new[0] / "output.log"
+                self._watch(log.parent, IN_CREATE | IN_MODIFY)
+            if log is not None and self._has_output(log):
+                return
+            select.select([self.fd], [], [], 0.05)  # an event, or a look at `cancel`
+            with contextlib.suppress(BlockingIOError):
+                os.read(self.fd, 65536)
+
+    def _has_output(self, log: Path) -> bool:
+        try:
+            with open(log, "rb") as f:
+                data = f.read(4096)
+        except FileNotFoundError:
+            return False
+        if data.startswith(b"o ") or b"\no " in data:
+            self.seen_at = time.perf_counter()
+            self.data = data
+            return True
+        return False
 
 
 def first_output(data: bytes) -> str:

@@ -35,17 +35,34 @@ def skipped_line(count: int) -> str:
 class RunConsumer(AsyncWebsocketConsumer):
     """A run's output from its first line, then live; and its state as it changes."""
 
+    group: str | None = None
+
     async def connect(self):
-        self.run = await _get_run(self.scope["user"], self.scope["url_route"]["kwargs"]["run_id"])
-        if self.run is None:
+        run_id = self.scope["url_route"]["kwargs"]["run_id"]
+        # Join first, then read the file: lines already in it are skipped by offset. Nothing
+        # of the group reaches a viewer who may not see the run: its events wait for
+        # connect() to return, and then it has left the group.
+        self.group = run_group(run_id)
+        await self.channel_layer.group_add(self.group, self.channel_name)
+        first = await self.see_run(run_id, shown_up_to(self.scope))
+        if first is None:
+            await self.channel_layer.group_discard(self.group, self.channel_name)
+            self.group = None
             await self.close(code=4404)
             return
-        self.group = run_group(self.run.pk)
-        # Join first, then read the file: lines already in it are skipped by offset.
-        await self.channel_layer.group_add(self.group, self.channel_name)
         await self.accept()
-        await self.send(await asyncio.to_thread(self.catch_up, shown_up_to(self.scope)))
+        await self.send(first)
         await self.send_status()
+
+    @database_sync_to_async
+    def see_run(self, run_id: int, page_offset: int | None) -> str | None:
+        """The run if this viewer may see it, and what the page lacks of its log (one trip
+        to a worker thread: a start's first line waits for this)."""
+        try:
+            self.run = get_run_for_user(self.scope["user"], run_id)
+        except Http404:
+            return None
+        return self.catch_up(page_offset)
 
     def catch_up(self, page_offset: int | None) -> str:
         """What the page lacks: the lines after those it was rendered with, else a new tail."""
@@ -59,10 +76,12 @@ class RunConsumer(AsyncWebsocketConsumer):
         return f'<div id="log-lines">{head}{render_lines(lines)}</div>'
 
     async def disconnect(self, code):
-        if getattr(self, "group", None):
+        if self.group:
             await self.channel_layer.group_discard(self.group, self.channel_name)
 
     async def run_output(self, event):
+        if self.group is None:  # turned away, with this already on its way
+            return
         fresh = [line for line in event["lines"] if line[0] >= self.offset]
         if not fresh:
             return
@@ -79,6 +98,8 @@ class RunConsumer(AsyncWebsocketConsumer):
         )
 
     async def run_state(self, event):
+        if self.group is None:
+            return
         self.run = await _get_run(self.scope["user"], self.run.pk)
         if self.run is None:  # access taken away
             await self.close()

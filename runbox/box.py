@@ -21,6 +21,7 @@ import logging
 import os
 import re
 import resource
+import select
 import shlex
 import signal
 import socket
@@ -126,6 +127,7 @@ class Box:
         self._fds = {seccomp_fd} if seccomp_fd is not None else set()
         self.disk_mb = disk_mb
         self.init_pid: int | None = None
+        self.init_fd: int | None = None  # a pidfd of it
         self.pidns: int | None = None
         self.served: list = []
         self.nat: asyncio.subprocess.Process | None = None
@@ -137,10 +139,12 @@ class Box:
         return None
 
     async def _enter_cgroup(self, wait: bool) -> None:
+        """`wait`: the box's first process joins now, before anything of it runs (nothing
+        else is there yet: no look for strays); else while the program starts."""
         if self.cgroup is None:
             return
         if wait:
-            await asyncio.to_thread(self.gather)
+            await asyncio.to_thread(self.cgroup.add, self.init_pid)
         else:
             self._join_cgroup()
 
@@ -205,12 +209,11 @@ class Box:
 
     def kill(self) -> None:
         """Every process of the run, at once: the end of its pid namespace's first process
-        takes all the others with it."""
-        if self.init_pid is not None:
+        takes all the others with it (the kernel kills them; none can leave the namespace).
+        Through a pidfd: never another process that got the number after it."""
+        if self.init_fd is not None:
             with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.kill(self.init_pid, signal.SIGKILL)
-        if self.cgroup is not None:
-            self.cgroup.kill()
+                signal.pidfd_send_signal(self.init_fd, signal.SIGKILL)
 
     # -- after the end ----------------------------------------------------------------------
 
@@ -221,7 +224,11 @@ class Box:
         if self._joining is not None:
             await asyncio.gather(self._joining, return_exceptions=True)
         deadline = time.monotonic() + GONE_TIMEOUT
-        while await asyncio.to_thread(self.processes) and time.monotonic() < deadline:
+        while (
+            self._init_alive()
+            and await asyncio.to_thread(self.processes)
+            and time.monotonic() < deadline
+        ):
             self.kill()
             await asyncio.sleep(0.01)
         for served in self.served:
@@ -236,6 +243,22 @@ class Box:
         if self.cgroup is not None:
             await asyncio.to_thread(self.cgroup.remove)
         self._close(*self._fds)
+        self.init_fd = None  # closed with the rest: its number may be anyone's now
+
+    def _init_alive(self) -> bool:
+        """Whether the run's pid namespace may still hold processes: its first process ends
+        last (the kernel ends and reaps the others first), so once it has ended none are
+        left; no look through /proc is needed. Its pidfd is readable once it has ended."""
+        if self.init_fd is None:
+            return self.init_pid is not None
+        return not select.select([self.init_fd], [], [], 0)[0]
+
+    def _adopt_init(self, pid: int) -> None:
+        """The run's first process, held by a pidfd from now on."""
+        self.init_pid = pid
+        with contextlib.suppress(OSError):  # gone already: nothing to hold
+            self.init_fd = os.pidfd_open(pid)
+            self._fds.add(self.init_fd)
 
     def _close(self, *fds: int) -> None:
         for fd in fds:
@@ -282,7 +305,8 @@ class BwrapBox(Box):
         `wait_for_cgroup` False: the run's processes join its cgroup while they start."""
         self._close(*self.pass_fds(), self.script_r)  # the sandbox has them now
         info = await self._read_info()
-        self.init_pid, self.pidns = info["child-pid"], info["pid-namespace"]
+        self._adopt_init(info["child-pid"])
+        self.pidns = info["pid-namespace"]
         for limit, values in self.rlimits.items():
             resource.prlimit(self.init_pid, limit, values)
         await self._enter_cgroup(wait_for_cgroup)
@@ -390,7 +414,7 @@ class RootlessBox(Box):
         self._close(*self.pass_fds())
         try:
             sockets = await asyncio.to_thread(self._handshake, spec)
-            self.init_pid = first_child(launcher_pid)
+            self._adopt_init(first_child(launcher_pid))
             self.pidns = os.stat(f"/proc/{self.init_pid}/ns/pid").st_ino
             await self._enter_cgroup(wait_for_cgroup)
             await self._serve(sockets)
