@@ -19,16 +19,13 @@ import socket
 import tempfile
 import zlib
 from collections.abc import Awaitable, Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 from signal import SIGKILL
 
-from asgiref.sync import ThreadSensitiveContext
 from channels.db import database_sync_to_async
 from channels.layers import get_channel_layer
-from django import db
 from django.conf import settings
 from django.utils import timezone
 
@@ -138,22 +135,12 @@ class RobotAgent:
     # -- life cycle -----------------------------------------------------------------------
 
     async def serve(self) -> None:
-        """Run until cancelled; always shuts down its programs and robot on the way out.
-
-        The agent's database work runs on a thread of its own, in order: not queued behind
-        the web pages' and websockets' (the one thread Django's async code shares), nor they
-        behind a run's start and end."""
-        database = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"agent-{self.name}-db")
+        """Run until cancelled; always shuts down its programs and robot on the way out."""
         try:
-            async with ThreadSensitiveContext(executor=database):
-                try:
-                    await self.start()
-                    await asyncio.gather(*self._tasks)
-                finally:
-                    await self.shutdown()
+            await self.start()
+            await asyncio.gather(*self._tasks)
         finally:
-            await asyncio.wrap_future(database.submit(db.connections.close_all))
-            database.shutdown(wait=False)
+            await self.shutdown()
 
     async def start(self) -> None:
         robot = await self._load_robot()

@@ -11,6 +11,8 @@ own part: the program's file and command handed to the waiting box (runbox.box.B
     ahead.soon(key, now=True)        # ... made at once (the robot has nothing to do)
     process = await ahead.take(key, name)   # that box if it fits, else one made now;
                                             # its cgroup is named `name` from then on
+                                            # (on cgroup v1; v2 refuses renames: a box
+                                            # made ahead keeps its name, `box-N`)
     await ahead.close()
 
 A box made for other settings (`key`: limits, network, the robot's services) is not used,
@@ -23,6 +25,7 @@ import itertools
 import logging
 from collections.abc import Callable, Hashable
 
+from runbox.cgroups import CgroupError
 from runbox.supervisor import RunProcess
 
 log = logging.getLogger(__name__)
@@ -48,8 +51,9 @@ class Ahead:
         ready, self.ready = self.ready, None
         if ready is not None and self.key == key and ready.running and not ready.stop_requested:
             cgroup = ready.box.cgroup
-            if cgroup is not None:
-                cgroup.rename(self.prefix + name)
+            if cgroup is not None and cgroup.support.version == "v1":  # v2 refuses renames
+                with contextlib.suppress(CgroupError):  # a name is for people: it may stay
+                    cgroup.rename(self.prefix + name)
             self.soon(key)
             return ready
         if ready is not None:

@@ -314,7 +314,7 @@ class RunCgroup:
     def _limit(self) -> None:
         d, mem, percent = self.dirs, self.memory_bytes, self.cpu_percent
         if self.v2:
-            if mem:
+            if mem and "memory" in self.support.controllers:  # detect() asks for it
                 _write(d["memory"] / "memory.max", mem)
                 # No swap at all: v2 limits swap apart from RAM, so RAM + swap stays <= mem.
                 if (d["memory"] / "memory.swap.max").exists():
@@ -341,7 +341,8 @@ class RunCgroup:
 
     def rename(self, name: str) -> None:
         """Call it `name` from now on, processes and all (a box made ahead takes its run's
-        name). A rename is no move: nothing waits for the kernel. Raises CgroupError."""
+        name). A rename is no move: nothing waits for the kernel. cgroup v1 only: the v2
+        kernel refuses (EPERM). Raises CgroupError."""
         if not name or "/" in name or name.startswith("."):
             raise CgroupError(f"bad cgroup name {name!r}")
         done = []
