@@ -22,7 +22,7 @@ from programs.languages import LANGUAGES, get_language
 from programs.models import MAX_SOURCE_BYTES, Program, Run
 from programs.runlog import plain_text
 from robotide.schemas import Body
-from robots import run_queue
+from robots import run_queue, stops
 from robots.models import get_robot_for_user
 from robots.runs import request_stop, start_run
 
@@ -384,4 +384,4 @@ def move_in_queue(request, run_id: int, data: QueueMoveIn):
 def resume_queue(request, data: QueueResumeIn):
     """After an emergency stop held a robot's queue: staff or its owner let it move again."""
     robot = get_robot_for_user(request.user, data.robot)
-    return {"robot": robot.name, "waiting": run_queue.resume(request.user, robot)}
+    return {"robot": robot.name, "waiting": stops.resume(request.user, robot, "the API")}

@@ -4,19 +4,27 @@ Both are refused with ``OutboundError``: its message is for the user, its ``stat
 status that fits.
 
     OutboundError
-     ├── 403  sending by e-mail is turned off here (ROBOTIDE_EMAIL_PER_HOUR=0)
+     ├── 403  sending by e-mail is turned off here (ROBOTIDE_EMAIL_PER_HOUR=0), or a push to an
+     │        address that is not public and not in ROBOTIDE_PUSH_ALLOW (refused before connecting)
      ├── 422  not an e-mail address, not an http(s) URL, not a token
      ├── 429  too many this hour (per user: the appliance must not become a spam relay)
-     ├── 502  the mail server or the other robotide refused, or the other cannot be reached
+     ├── 502  the mail server or the other robotide refused, the other is not reachable, or it
+     │        is not a robotide
      ├── 503  the mail server cannot be reached
-     └── 504  the other robotide did not answer in time
+     └── 504  the other robotide is not reachable: no answer in time
 
 A push is robot to robot, as the paper's Bluetooth share: the program is POSTed to the other
 appliance's ``/api/programs`` with a token of the account that gets it, and arrives there as
 that account's program, with ``origin`` saying where it came from.
+
+A push goes only to the addresses its host name had when checked: public ones, or a lab's own
+robotides listed in ROBOTIDE_PUSH_ALLOW. Its errors say "not reachable" or "not a robotide" and
+never what answered, so it cannot probe the services of the lab's network.
 """
 
+import functools
 import http.client
+import ipaddress
 import json
 import math
 import re
@@ -24,9 +32,7 @@ import smtplib
 import socket
 import ssl
 import time
-import urllib.error
-import urllib.request
-from urllib.parse import urlsplit, urlunsplit
+from urllib.parse import quote, urlsplit, urlunsplit
 
 from django.conf import settings
 from django.core.cache import cache
@@ -190,8 +196,10 @@ def push_program(program: Program, url: str, token: str, *, user, site: str) -> 
             " (`robotide token USERNAME` on that robotide).",
             422,
         )
-    # Counted whether it arrives or not: each push is a request to an address the user chose.
+    # Counted whether it arrives or not: each push is a request to an address the user chose,
+    # and a refused one still looked up a name the user chose.
     _take_allowance("push", user, PUSHES_PER_HOUR, "pushes")
+    addresses = checked_addresses(base)
     body = {
         "name": program.name,
         "language": program.language,
@@ -202,16 +210,16 @@ def push_program(program: Program, url: str, token: str, *, user, site: str) -> 
     for n in range(1, NAME_TRIES + 1):
         if n > 1:
             body["name"] = f"{stem} ({n})"
-        status, answer, headers = _post(base, token, body)
-        if status == 201 and isinstance(answer, dict):
+        status, answer = _post(base, addresses, token, body)
+        if status == 201 and _is_program(answer):
             return {
                 "url": base,
-                "id": answer.get("id") if isinstance(answer.get("id"), int) else None,
-                "name": str(answer.get("name", body["name"])),
-                "owner": str(answer.get("owner", "")),
+                "id": answer["id"],
+                "name": answer["name"],
+                "owner": answer["owner"],
             }
-        if status != 409:  # 409: the account has a program of that name
-            raise OutboundError(_refusal(base, status, answer, headers), 502)
+        if status != 409 or not _is_error(answer):  # 409: the account has a program of that name
+            raise OutboundError(_refusal(base, status, answer), 502)
     raise OutboundError(
         f"The account at {base} already has programs named {program.name!r} to"
         f" {body['name']!r}: rename the program first.",
@@ -237,73 +245,186 @@ def robotide_url(url: str) -> str:
     return urlunsplit((parts.scheme.lower(), parts.netloc, parts.path.rstrip("/"), "", ""))
 
 
-class _NoRedirects(urllib.request.HTTPRedirectHandler):
-    # A redirect is reported, not followed: the token must not go on to another address.
-    def redirect_request(self, req, fp, code, msg, headers, newurl):
-        return None
+# -- Where a push may go --------------------------------------------------------------------------
+# A push connects to an address the user chose, from inside the lab's network: without these
+# checks it reaches this machine's databases and the cloud's metadata service (an SSRF), and
+# its errors would tell which services listen where (a port scanner).
+
+NAT64 = ipaddress.ip_network("64:ff9b::/96")  # the well-known prefix: the IPv4 is the last 32 bits
 
 
-# Directly, never through a proxy from the environment: the token goes to the address given.
-_opener = urllib.request.build_opener(urllib.request.ProxyHandler({}), _NoRedirects())
+def checked_addresses(base: str) -> list[tuple]:
+    """The addresses ``base``'s host has, looked up once; 403 if any is not one to push to.
 
-
-def _post(base: str, token: str, body: dict):
-    request = urllib.request.Request(
-        base + "/api/programs",
-        data=json.dumps(body).encode(),
-        method="POST",
-        headers={
-            "Content-Type": "application/json",
-            "Accept": "application/json",
-            "Authorization": f"Bearer {token}",
-            "User-Agent": "robotide-push",
-        },
-    )
+    The push connects to these, so a second look-up cannot answer otherwise (DNS rebinding).
+    """
+    parts = urlsplit(base)
     try:
-        with _opener.open(request, timeout=PUSH_TIMEOUT) as response:
-            return response.status, _read_json(response), response.headers
-    except urllib.error.HTTPError as exc:
-        with exc:
-            return exc.code, _read_json(exc), exc.headers
+        found = socket.getaddrinfo(parts.hostname, _port(parts), type=socket.SOCK_STREAM)
+    except (OSError, UnicodeError) as exc:  # no such host
+        raise OutboundError(_unreachable(base), 502) from exc
+    # All of them: a name with one public and one private address is refused, not half-used.
+    if not found or not all(_may_push_to(sockaddr[0]) for *_, sockaddr in found):
+        raise OutboundError(
+            f"{base} is not an address to push to: pushes go to public addresses only, and to"
+            " those ROBOTIDE_PUSH_ALLOW lists on this robotide.",
+            403,
+        )
+    return found
+
+
+def _port(parts) -> int:
+    return parts.port or (443 if parts.scheme == "https" else 80)
+
+
+def _may_push_to(host: str) -> bool:
+    try:
+        ip = ipaddress.ip_address(host)
+    except ValueError:
+        return False
+    ip = getattr(ip, "ipv4_mapped", None) or ip  # ::ffff:a.b.c.d is a.b.c.d
+    return all(_allowed(each) or _public(each) for each in (ip, *_embedded(ip)))
+
+
+def _embedded(ip) -> list:
+    """The IPv4 addresses an IPv6 address leads to through a gateway (NAT64, 6to4, Teredo)."""
+    if ip.version == 4:
+        return []
+    found = [ipaddress.IPv4Address(int(ip) & 0xFFFFFFFF)] if ip in NAT64 else []
+    if ip.sixtofour:
+        found.append(ip.sixtofour)
+    if ip.teredo:
+        found.extend(ip.teredo)
+    return found
+
+
+def _public(ip) -> bool:
+    # is_global alone lets multicast through, and IPv6 site-local in Python 3.11.
+    return ip.is_global and not (
+        ip.is_loopback
+        or ip.is_link_local
+        or ip.is_private
+        or ip.is_multicast
+        or ip.is_reserved
+        or ip.is_unspecified
+        or getattr(ip, "is_site_local", False)
+    )
+
+
+def _allowed(ip) -> bool:
+    """In ROBOTIDE_PUSH_ALLOW: a lab's own robotides on its LAN."""
+    networks = (ipaddress.ip_network(each, strict=False) for each in settings.PUSH_ALLOW)
+    return any(ip.version == net.version and ip in net for net in networks)
+
+
+# -- The request ----------------------------------------------------------------------------------
+
+
+class _Connection(http.client.HTTPConnection):
+    """HTTP(S) to addresses checked already; the URL's host name goes in the Host header and,
+    on https, in SNI and the certificate check."""
+
+    def __init__(self, base: str, addresses: list[tuple]):
+        parts = urlsplit(base)
+        self.tls = parts.scheme == "https"
+        self.default_port = 443 if self.tls else 80  # so Host gets no ":443"
+        super().__init__(parts.hostname, _port(parts), timeout=PUSH_TIMEOUT)
+        self.addresses = addresses
+
+    def connect(self):
+        sock = _connect(self.addresses, self.timeout)
+        self.sock = _tls().wrap_socket(sock, server_hostname=self.host) if self.tls else sock
+
+
+def _connect(addresses: list[tuple], timeout: float) -> socket.socket:
+    """A socket connected to the first of ``addresses`` that takes it."""
+    error = OSError("no address")
+    for family, kind, proto, _, sockaddr in addresses:
+        sock = socket.socket(family, kind, proto)
+        try:
+            sock.settimeout(timeout)
+            sock.connect(sockaddr)
+            return sock
+        except OSError as exc:
+            sock.close()
+            error = exc
+    raise error
+
+
+@functools.cache
+def _tls() -> ssl.SSLContext:
+    return ssl.create_default_context()
+
+
+def _post(base: str, addresses: list[tuple], token: str, body: dict):
+    """``(status, answer)``: the JSON object answered, or None if the answer is not one.
+
+    Directly, never through a proxy from the environment: the token goes to the address given.
+    A redirect is an answer like any other, never followed.
+    """
+    connection = _Connection(base, addresses)
+    headers = {
+        "Content-Type": "application/json",
+        "Accept": "application/json",
+        "Authorization": f"Bearer {token}",
+        "User-Agent": "robotide-push",
+    }
+    path = quote(urlsplit(base).path, safe="/%!$&'()*+,;=:@~") + "/api/programs"
+    try:
+        connection.request("POST", path, json.dumps(body).encode(), headers)
+        response = connection.getresponse()
+        return response.status, _read_json(response)
+    # Never what answered, or how it failed: that would make this a port scanner.
     except TimeoutError as exc:
-        raise OutboundError(_late(base), 504) from exc
-    except urllib.error.URLError as exc:
-        if isinstance(exc.reason, TimeoutError):
-            raise OutboundError(_late(base), 504) from exc
-        raise OutboundError(f"Cannot reach {base} ({_why(exc.reason)}).", 502) from exc
-    except http.client.InvalidURL as exc:
-        raise OutboundError(f"{base} is not an address to push to.", 422) from exc
-    except (http.client.HTTPException, OSError) as exc:  # dropped mid-answer, or not HTTP
-        raise OutboundError(f"Cannot reach {base} ({_why(exc)}).", 502) from exc
+        raise OutboundError(
+            f"{base} is not reachable: no answer within {PUSH_TIMEOUT:g} s.", 504
+        ) from exc
+    except http.client.RemoteDisconnected as exc:  # closed without a word: a ConnectionResetError
+        raise OutboundError(_unreachable(base), 502) from exc
+    except http.client.HTTPException as exc:  # an answer, not in HTTP
+        raise OutboundError(_not_a_robotide(base), 502) from exc
+    except OSError as exc:  # refused, reset, no route, TLS refused
+        raise OutboundError(_unreachable(base), 502) from exc
+    finally:
+        connection.close()
 
 
 def _read_json(response):
+    if response.headers.get_content_type() != "application/json":
+        return None
     data = response.read(MAX_ANSWER_BYTES + 1)
     if len(data) > MAX_ANSWER_BYTES:
         return None
     try:
-        return json.loads(data)
+        answer = json.loads(data)
     except ValueError:
         return None
+    return answer if isinstance(answer, dict) else None
 
 
-def _late(base: str) -> str:
-    return f"The robotide at {base} did not answer within {PUSH_TIMEOUT:g} s."
+# -- What the answer means ------------------------------------------------------------------------
+# Only what a robotide answers is told apart. Anything else is "not a robotide", whatever it
+# was: the user learns nothing of the services at an address.
 
 
-def _why(reason) -> str:
-    if isinstance(reason, ConnectionRefusedError):
-        return "connection refused"
-    if isinstance(reason, socket.gaierror):
-        return "no such host"
-    if isinstance(reason, ssl.SSLCertVerificationError):
-        return f"its TLS certificate is not trusted: {reason.verify_message}"
-    if isinstance(reason, OSError) and reason.strerror:
-        return reason.strerror.lower()
-    return one_line(str(reason) or type(reason).__name__, 200)
+def _is_program(answer) -> bool:
+    """A robotide's 201: the program as it is there."""
+    return (
+        isinstance(answer, dict)
+        and type(answer.get("id")) is int
+        and isinstance(answer.get("name"), str)
+        and isinstance(answer.get("owner"), str)
+    )
 
 
-def _refusal(base: str, status: int, answer, headers) -> str:
+def _is_error(answer) -> bool:
+    """A robotide's error: ``{"detail": ...}``, a message or pydantic's list of errors."""
+    return isinstance(answer, dict) and isinstance(answer.get("detail"), str | list)
+
+
+def _refusal(base: str, status: int, answer) -> str:
+    if not _is_error(answer):
+        return _not_a_robotide(base)
     if status in (401, 403):
         return (
             f"The token was refused by {base}: make one there for the account that should get"
@@ -311,13 +432,10 @@ def _refusal(base: str, status: int, answer, headers) -> str:
         )
     if status == 413:
         return f"The program is too large for the robotide at {base}."
-    if 300 <= status < 400:
-        where = one_line(headers.get("Location", "") if headers else "", 200)
-        return f"{base} redirects to {where or 'another address'}: give that address instead."
     detail = _detail(answer)
-    if status == 404 or not detail:
-        return f"{base} does not look like a robotide: it answered {status} to POST /api/programs."
-    return f"{base} refused the program: {detail}"
+    if status in (400, 422) and detail:
+        return f"{base} refused the program: {detail}"
+    return _not_a_robotide(base)
 
 
 def _detail(answer) -> str:
@@ -327,3 +445,13 @@ def _detail(answer) -> str:
         messages = [str(e.get("msg", "")) for e in detail if isinstance(e, dict)]
         detail = "; ".join(m.removeprefix("Value error, ") for m in messages if m)
     return one_line(detail, 300) if isinstance(detail, str) else ""
+
+
+def _unreachable(base: str) -> str:
+    if base.startswith("https:"):
+        return f"{base} is not reachable, or its TLS certificate is not trusted here."
+    return f"{base} is not reachable."
+
+
+def _not_a_robotide(base: str) -> str:
+    return f"{base} is not a robotide, or not its own address (redirects are not followed)."

@@ -186,7 +186,7 @@ def _start(request, program: Program, robot_name: str) -> HttpResponse:
     robot = get_robot_for_user(request.user, robot_name)
     try:
         run = start_run(program, robot, request.user)
-    except RunRefused as exc:
+    except (RunRefused, PermissionDenied) as exc:
         messages.error(request, str(exc))
         return redirect("program-edit", program.pk)
     return redirect("run-detail", run.pk)

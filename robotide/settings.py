@@ -5,6 +5,7 @@ in-memory channel layer, the robot agent inside the web server process.
 Fleet mode: ``DATABASE_URL`` and ``REDIS_URL`` switch to PostgreSQL and Redis.
 """
 
+import ipaddress
 import os
 import secrets
 from pathlib import Path
@@ -328,6 +329,16 @@ EMAIL_BACKEND = (
 DEFAULT_FROM_EMAIL = os.environ.get("DEFAULT_FROM_EMAIL", "robotide@localhost")
 # Mails one user may send in an hour, so the appliance cannot be used to spam; 0 turns it off.
 EMAIL_PER_HOUR = env_int("ROBOTIDE_EMAIL_PER_HOUR", 20)
+
+# -- Push (programs pushed to another robotide: programs.outbound) ---------------------------------
+# Pushes go to public addresses only, and to these networks besides: a lab's own robotides on its
+# LAN, e.g. "10.0.5.0/24,192.168.1.20". Checked here, so a typo stops the start, not a push.
+PUSH_ALLOW = env_list("ROBOTIDE_PUSH_ALLOW", [])
+for _network in PUSH_ALLOW:
+    try:
+        ipaddress.ip_network(_network, strict=False)
+    except ValueError:
+        raise ValueError(f"ROBOTIDE_PUSH_ALLOW: {_network!r} is no address or network") from None
 
 # -- Pages (lab rules, robot wiring, exercises: staff edit them in the admin) ---------------------
 # django.contrib.flatpages served under /pages/, listed in the menu, sanitised when shown.

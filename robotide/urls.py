@@ -58,6 +58,7 @@ urlpatterns = [
         name="robot-button-press",
     ),
     path("robots/<slug:name>/estop", robots.robot_estop, name="robot-estop"),
+    path("robots/<slug:name>/resume", robots.robot_resume, name="robot-resume"),
     path("robots/<slug:name>/run", robots.robot_run, name="robot-run"),
     path("robots/<slug:name>/queue", robots.robot_queue, name="robot-queue"),
     path("robots/<slug:name>/queue/move", robots.robot_queue_move, name="robot-queue-move"),

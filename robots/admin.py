@@ -5,7 +5,7 @@ from gateway import specs
 from robots.bus import announce_robot_sync, reconfigure_sync, tell_agent_sync
 from robots.driver_settings import current_values, option_field
 from robots.forms import RobotConfigForm
-from robots.models import RUN_SETTINGS, GatewayEndpoint, Robot, SerialBridge
+from robots.models import RUN_SETTINGS, GatewayEndpoint, Robot, RobotStop, SerialBridge
 
 
 class RobotAdminForm(RobotConfigForm):
@@ -17,7 +17,7 @@ class RobotAdminForm(RobotConfigForm):
     )
 
     class Meta(RobotConfigForm.Meta):
-        fields = ["name", "url", "description", "owner", "groups"]
+        fields = ["name", "url", "description", "owner", "groups", "drive_by", "estop_by"]
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -96,3 +96,26 @@ class RobotAdmin(admin.ModelAdmin):
         if change:  # the agent applies the rows as they are now
             tell_agent_sync(form.instance.name, "gateway.reload")
             tell_agent_sync(form.instance.name, "bridges.reload")
+
+
+@admin.register(RobotStop)
+class RobotStopAdmin(admin.ModelAdmin):
+    """Emergency stops and resumes, as they were recorded: read only."""
+
+    list_display = ["at", "robot", "kind", "username", "via", "ended", "note"]
+    list_filter = ["kind", "robot"]
+    search_fields = ["username", "robot__name"]
+    date_hierarchy = "at"
+
+    @admin.display(description="runs ended")
+    def ended(self, stop: RobotStop) -> str:
+        return ", ".join(f"#{r['run']} {r['program']} ({r['owner']})" for r in stop.runs) or "—"
+
+    def has_add_permission(self, request) -> bool:
+        return False
+
+    def has_change_permission(self, request, obj=None) -> bool:
+        return False
+
+    def has_delete_permission(self, request, obj=None) -> bool:
+        return False

@@ -38,7 +38,7 @@ from robots.bus import MANAGER_CHANNEL, RUNS_GROUP, run_group
 from robots.camera import CameraHub
 from robots.gateway import Gateway
 from robots.lease import ControlLease, Holder, LeaseHeld
-from robots.models import Robot, agent_channel, robot_group
+from robots.models import Robot, RobotStop, agent_channel, robot_group
 from robots.robot_api import RobotApi
 from robots.run_queue import RunQueue
 from runbox import SYSTEM_PATH, cgroups, launcher, seccomp
@@ -98,6 +98,7 @@ class RobotAgent:
         self._deadman: asyncio.Task | None = None
         self.lease = ControlLease()
         self.cancelled: set[int] = set()  # stopped before their start was handled
+        self.estops = 0  # emergency stops so far: a drive on its way sees one come
         self._shows_snapshot_due = True
         self.layer = get_channel_layer()
         # This robotide's (its data folder's) runs of this robot, among all on the machine.
@@ -148,6 +149,10 @@ class RobotAgent:
         await self.gateway.attach(self.driver)
         await self.open_robot()
         self.units = flat_units(self.driver.capabilities().get("sensors", {}))
+        pressed = await database_sync_to_async(RobotStop.pressed)(robot.pk)
+        if pressed is not None:  # pressed while this agent was away: still in force
+            self.lease.estop(pressed.username)
+            self.queue.held = True
         lost = await database_sync_to_async(Run.mark_lost)(self.name)
         for run_id in lost:
             end_leftovers(run_id)
@@ -323,8 +328,10 @@ class RobotAgent:
                 self.cancelled.add(message["run_id"])
                 self.queue.cancel(message["run_id"])  # if it waits in line
         elif kind == "robot.estop":
-            stopped = await self.estop()
-            await self.reply(message, {"stopped": stopped})
+            ended = await self.estop(message.get("by", ""))
+            await self.reply(message, {"stopped": len(ended), "runs": ended})
+        elif kind == "robot.resume":
+            await self.reply(message, {"resumed": await self.resume()})
         elif kind == "robot.sensors":
             await self.reply(message, {"sensors": await self.driver.sensors()})
         elif kind == "robot.state":
@@ -532,23 +539,49 @@ class RobotAgent:
         self._run_changed(run_id)
 
     def stop_run(self, run_id: int, reason: str) -> bool:
+        """Stop: SIGTERM, then SIGKILL after the grace. The program may clean up meanwhile,
+        but its drive() is refused from now (RobotApi.drive) and its motion stops now."""
         active = self.runs.get(run_id)
         if active is None:
             return False
         active.process.stop(reason)
+        if self.motion_owner == run_id:
+            asyncio.ensure_future(self.stop_motion_of(run_id))
         return True
 
-    async def estop(self) -> int:
-        self.queue.hold()  # runs waiting stay queued until someone resumes
-        stopped = sum(self.stop_run(run_id, "emergency stop") for run_id in list(self.runs))
+    async def estop(self, by: str = "") -> list[int]:
+        """The emergency stop. All at once, before anything is awaited: every run's token
+        dies (nothing a program sends after this instant is obeyed) and its processes get
+        SIGKILL, no grace; the lease goes to the emergency stop, so no program, hand, queue
+        or staff moves the robot until someone resumes. Then the robot's own stop on the
+        wire; a drive already on its way there is stopped after it (see drive_for).
+        Returns the runs it ended."""
+        self.estops += 1
+        ended = [self._end_now(active, "emergency stop") for active in list(self.runs.values())]
+        self.lease.estop(by or "someone")
         self.motion_owner = None
-        if self.lease.clear():
-            self._lease_changed()
+        if self._deadman is not None:
+            self._deadman.cancel()
+        self.queue.hold()
+        self._lease_changed()
         try:
             await self.driver.stop()
         except rhal.RhalError:  # link down: the robot's own watchdog stops it
             log.exception("agent %s: emergency stop could not reach the robot", self.name)
-        return stopped
+        return ended
+
+    def _end_now(self, active: ActiveRun, reason: str) -> int:
+        self.tokens.pop(active.token, None)
+        active.process.kill(reason)
+        return active.run_id
+
+    async def resume(self) -> bool:
+        """After an emergency stop: the robot may move again, and its queue moves."""
+        if not self.lease.end_estop():
+            return False
+        self._lease_changed()
+        await self.queue.resume()
+        return True
 
     # -- driving by hand, and who may drive ------------------------------------------------
 
@@ -561,15 +594,27 @@ class RobotAgent:
         """A browser drives: with the lease, until it stops, leaves or goes quiet."""
         owner = holder.key
         try:
-            self.take_lease(holder)
-            await self.driver.drive(linear, angular)
+            await self.drive_for(holder, linear, angular)
         except (LeaseHeld, rhal.RhalError, ValueError) as exc:
             await self.layer.send(owner, {"type": "robot.teleop_error", "error": str(exc)})
             return
-        self.motion_owner = owner
         if self._deadman is not None:
             self._deadman.cancel()
         self._deadman = asyncio.create_task(self._stop_after(owner, TELEOP_DEADMAN))
+
+    async def drive_for(self, holder: Holder, linear: float, angular: float):
+        """Drive as `holder`, who must hold the lease (LeaseHeld else). An emergency stop
+        that comes while the command is on its way has the last word: the robot is stopped
+        again after it, and the caller told."""
+        self.take_lease(holder)
+        estops = self.estops
+        applied = await self.driver.drive(linear, angular)
+        if self.estops != estops:
+            with contextlib.suppress(rhal.RhalError):
+                await self.driver.stop()
+            raise LeaseHeld(f"{self.lease.holder.describe()} came first: the robot stays stopped")
+        self.motion_owner = holder.key
+        return applied
 
     async def stop_motion_of(self, owner: int | str) -> None:
         """Stop the motors if ``owner``'s commands are what they follow now."""
@@ -587,7 +632,11 @@ class RobotAgent:
     async def take_control(self, holder: Holder) -> None:
         """Staff take over: whoever drove is stopped and now gets a clear error."""
         previous = self.lease.holder
-        self.lease.acquire(holder, take_over=True)
+        try:
+            self.lease.acquire(holder, take_over=True)
+        except LeaseHeld as exc:  # the emergency stop's, until resumed
+            await self.layer.send(holder.key, {"type": "robot.teleop_error", "error": str(exc)})
+            return
         if previous is not None and self.motion_owner == previous.key:
             await self.stop_motion_of(previous.key)
         self._lease_changed()

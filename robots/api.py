@@ -9,6 +9,7 @@ from pydantic import field_validator, model_validator
 import rhal
 from programs.api import Error
 from robotide.schemas import Body
+from robots import stops
 from robots.bus import announce_robot_sync, ask_agent_sync, reconfigure_sync
 from robots.driver_settings import check_settings, known_driver
 from robots.models import Robot, get_robot_for_user, robots_for_user
@@ -107,6 +108,15 @@ def robot_sensors(request, name: str):
 
 @robots_router.post("/{name}/estop", response={200: dict, 503: Error})
 def robot_estop(request, name: str):
+    """The emergency stop: the robot's own stop, every run on it killed at once, and nothing
+    moves it until it is resumed. Recorded (who, when, the runs it ended)."""
     robot = get_robot_for_user(request.user, name)
-    reply = ask_agent_sync(robot.name, "robot.estop")
-    return {"robot": robot.name, "stopped_runs": reply["stopped"]}
+    record = stops.press(request.user, robot, "the API")
+    return {"robot": robot.name, "stopped_runs": len(record.runs), "runs": record.runs}
+
+
+@robots_router.post("/{name}/resume", response={200: dict})
+def robot_resume(request, name: str):
+    """After an emergency stop: staff, the robot's owner or whoever pressed it."""
+    robot = get_robot_for_user(request.user, name)
+    return {"robot": robot.name, "waiting": stops.resume(request.user, robot, "the API")}

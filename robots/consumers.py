@@ -55,6 +55,7 @@ class RobotConsumer(AsyncWebsocketConsumer):
             return
         self.shows: dict[str, dict] = {}
         self.drove = False
+        self.may_drive = await database_sync_to_async(self.robot.drivable_by)(self.scope["user"])
         self.group = robot_group(self.robot.name)
         await self.channel_layer.group_add(self.group, self.channel_name)
         await self.accept()
@@ -77,6 +78,10 @@ class RobotConsumer(AsyncWebsocketConsumer):
         kind, speeds = command
         user = self.scope["user"]
         robot, owner = self.robot.name, self.channel_name
+        if kind in ("drive", "take") and not self.may_drive:
+            error = f"Only {self.robot.get_drive_by_display()} may drive {robot}."
+            await self.robot_teleop_error({"error": error})
+            return
         if kind == "drive":
             self.drove = True
             linear, angular = speeds

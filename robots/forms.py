@@ -8,6 +8,9 @@ from robots.driver_settings import add_option_fields, check_settings, known_driv
 from robots.models import RUN_SETTINGS, Robot, RobotButton
 
 
+WHO_FIELDS = ("drive_by", "estop_by")
+
+
 class RobotConfigForm(forms.ModelForm):
     """A robot's URL, description and driver options, one typed field per option.
 
@@ -17,14 +20,22 @@ class RobotConfigForm(forms.ModelForm):
 
     class Meta:
         model = Robot
-        fields = ["url", "description"]
-        labels = {"url": "URL"}
+        fields = ["url", "description", "drive_by", "estop_by"]
+        labels = {"url": "URL", "drive_by": "Who may drive it", "estop_by": "Who may stop it"}
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
+        for name in WHO_FIELDS:  # a form of old, or a script, that leaves them out keeps them
+            self.fields[name].required = False
         self.driver_changed = False
         if self.instance.url:
             add_option_fields(self, self.instance)
+
+    def clean_drive_by(self):
+        return self.cleaned_data.get("drive_by") or self.instance.drive_by or "everyone"
+
+    def clean_estop_by(self):
+        return self.cleaned_data.get("estop_by") or self.instance.estop_by or "everyone"
 
     def clean_url(self):
         try:

@@ -4,7 +4,8 @@ The first to drive takes the lease; while it is held, anyone else's drive() is r
 message naming the holder, and other people's pages show the controls read-only. A program
 holds it until it ends; a person until they release it, leave the page, or leave the controls
 alone for ``IDLE_SECONDS`` (then the next one may take it). Staff may take it over at any time.
-An emergency stop clears it.
+An emergency stop takes it from whoever holds it, and nobody may take it from the emergency
+stop, staff included: only resuming (``end_estop``) lets the robot move again.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 IDLE_SECONDS = 30.0
+ESTOP = "estop"  # the emergency stop's key as a holder
 
 
 class LeaseHeld(Exception):
@@ -22,11 +24,13 @@ class LeaseHeld(Exception):
 
 @dataclass(frozen=True)
 class Holder:
-    kind: str  # "run", "teleop" or "bridge"
-    key: int | str  # the run id, the browser's channel name, or "bridge HOST:PORT"
+    kind: str  # "run", "teleop", "bridge" or "estop"
+    key: int | str  # the run id, the browser's channel name, "bridge HOST:PORT" or "estop"
     user: str
 
     def describe(self) -> str:
+        if self.kind == "estop":
+            return f"the emergency stop {self.user} pressed"
         if self.kind == "run":
             return f"{self.user}'s program (run #{self.key})"
         if self.kind == "bridge":
@@ -45,6 +49,11 @@ class ControlLease:
 
     def acquire(self, holder: Holder, *, take_over: bool = False) -> bool:
         """Hold the lease (again); LeaseHeld if another holds it. True if it changed hands."""
+        if self.estopped:
+            raise LeaseHeld(
+                f"{self.holder.describe()} holds the robot: nothing moves it until staff, its"
+                " owner or the one who pressed it resumes (on the robot's page)"
+            )
         if self.holder == holder:
             self._active_at = self._clock()
             return False
@@ -56,16 +65,27 @@ class ControlLease:
         self.holder, self._active_at = holder, self._clock()
         return True
 
-    def release(self, key: int | str) -> bool:
-        """Let go if ``key`` holds the lease; True if it did."""
-        if self.holder is not None and self.holder.key == key:
+    def estop(self, by: str) -> None:
+        """Taken from whoever holds it, until end_estop()."""
+        self.holder = Holder("estop", ESTOP, by)
+
+    def end_estop(self) -> bool:
+        """The robot may move again; True if it had been emergency-stopped."""
+        if self.estopped:
             self.holder = None
             return True
         return False
 
-    def clear(self) -> bool:
-        held, self.holder = self.holder is not None, None
-        return held
+    @property
+    def estopped(self) -> bool:
+        return self.holder is not None and self.holder.kind == "estop"
+
+    def release(self, key: int | str) -> bool:
+        """Let go if ``key`` holds the lease; True if it did (never the emergency stop's)."""
+        if self.holder is not None and self.holder.key == key and not self.estopped:
+            self.holder = None
+            return True
+        return False
 
     def holds(self, key: int | str) -> bool:
         return self.holder is not None and self.holder.key == key

@@ -125,7 +125,8 @@ SCHEMAS: dict[str, dict[str, tuple[Callable, bool]]] = {
         "user": (_text(), OPTIONAL),
     },
     "run.stop": {"run_id": (_run_id, REQUIRED)},
-    "robot.estop": {},
+    "robot.estop": {"by": (_text(), OPTIONAL)},
+    "robot.resume": {},
     "robot.sensors": {},
     "robot.state": {},
     "robot.teleop": {

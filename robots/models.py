@@ -12,6 +12,13 @@ RUN_SETTINGS = (
 )  # fmt: skip
 
 
+WHO = [
+    ("everyone", "everyone who may see it"),
+    ("teachers", "the teachers of its classes, its owner and staff"),
+    ("owner", "its owner and staff"),
+]
+
+
 class Robot(models.Model):
     """A robot this appliance controls; its agent owns the hardware behind `url`."""
 
@@ -50,6 +57,16 @@ class Robot(models.Model):
     gateway_seeded = models.BooleanField(
         default=False, editable=False, help_text="Its default gateway endpoints were made"
     )
+    # Who may move it, among those who may see it (its classes). Safety first: everyone who
+    # sees a robot may stop it unless its owner says otherwise.
+    drive_by = models.CharField(
+        max_length=10, choices=WHO, default="everyone",
+        help_text="Who may drive it, with programs or by hand",
+    )  # fmt: skip
+    estop_by = models.CharField(
+        max_length=10, choices=WHO, default="everyone",
+        help_text="Who may press its emergency stop",
+    )  # fmt: skip
 
     class Meta:
         ordering = ["name"]
@@ -68,6 +85,23 @@ class Robot(models.Model):
     def configurable_by(self, user) -> bool:
         return user.is_staff or (self.owner_id is not None and self.owner_id == user.pk)
 
+    def drivable_by(self, user) -> bool:
+        """Run programs on it and drive it by hand (seeing it is checked apart)."""
+        return self._allows(self.drive_by, user)
+
+    def stoppable_by(self, user) -> bool:
+        """Press its emergency stop."""
+        return self._allows(self.estop_by, user)
+
+    def _allows(self, who: str, user) -> bool:
+        if not user.is_authenticated:
+            return False
+        if who == "everyone" or self.configurable_by(user):
+            return True
+        if who == "teachers":
+            return self.groups.filter(teachers__user=user).exists()
+        return False
+
     def driver_options(self) -> dict:
         """Options for rhal.connect(): the robot's settings but those for its runs."""
         return {k: v for k, v in self.settings.items() if k not in RUN_SETTINGS}
@@ -77,6 +111,35 @@ class Robot(models.Model):
 
     def run_isolation(self, defaults: dict) -> dict:
         return {**defaults, **{k: v for k, v in self.settings.items() if k in defaults}}
+
+
+class RobotStop(models.Model):
+    """An emergency stop pressed, or a robot let move again after one: who, when, what ran."""
+
+    robot = models.ForeignKey(Robot, on_delete=models.CASCADE, related_name="stops")
+    kind = models.CharField(max_length=10, choices=[("estop", "emergency stop"),
+                                                    ("resume", "resumed")])  # fmt: skip
+    user = models.ForeignKey(
+        django_settings.AUTH_USER_MODEL, null=True, on_delete=models.SET_NULL, related_name="+"
+    )
+    username = models.CharField(max_length=150, help_text="As it was then")
+    at = models.DateTimeField(default=timezone.now)
+    via = models.CharField(max_length=20, help_text="the robot's page, the API...")
+    # The runs it ended: [{"run": id, "owner": name, "program": name}].
+    runs = models.JSONField(default=list, blank=True)
+    note = models.CharField(max_length=300, blank=True, help_text="e.g. its agent unreachable")
+
+    class Meta:
+        ordering = ["-at", "-pk"]
+
+    def __str__(self) -> str:
+        return f"{self.get_kind_display()} of {self.robot} by {self.username} at {self.at:%c}"
+
+    @classmethod
+    def pressed(cls, robot_id: int) -> "RobotStop | None":
+        """The robot's emergency stop in force (pressed and not resumed since), if any."""
+        last = cls.objects.filter(robot_id=robot_id).first()
+        return last if last is not None and last.kind == "estop" else None
 
 
 class RobotButton(models.Model):

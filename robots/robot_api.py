@@ -142,13 +142,13 @@ class RobotApi:
 
     async def drive(self, active, params):
         linear, angular = bind_params(params, ("linear", "angular"), 1)
+        if active.process is not None and active.process.stop_requested:  # after Stop
+            raise RpcError(ROBOT_ERROR, "this program was asked to stop: it may not drive")
+        holder = Holder("run", active.run_id, active.user)
         try:
-            self.agent.take_lease(Holder("run", active.run_id, active.user))
+            return await self.agent.drive_for(holder, linear, 0.0 if angular is None else angular)
         except LeaseHeld as exc:
             raise RpcError(ROBOT_ERROR, str(exc)) from None
-        applied = await self.agent.driver.drive(linear, 0.0 if angular is None else angular)
-        self.agent.motion_owner = active.run_id
-        return applied
 
     async def stop(self, active, params):
         bind_params(params, (), 0)

@@ -54,7 +54,7 @@ log = logging.getLogger(__name__)
 
 TICK = 0.25  # seconds between looks at the lease (a person gone idle) and the turn's end
 RETRY_DELAY = 1.0
-CHANGED, RESUME = "run.queue_changed", "run.queue_resume"
+CHANGED, RESUME = "run.queue_changed", "run.queue_resume"  # RESUME: agents of old send it
 
 
 def turn_seconds(robot_settings: dict) -> float:
@@ -101,7 +101,7 @@ class RunQueue:
                 await self._count()
             if not self.waiting:
                 return False
-        reason = Run.HELD if self.held else ""
+        reason = Run.HELD if self.held or self.agent.lease.estopped else ""
         rank = await database_sync_to_async(Run.enqueue)(run_id, reason)
         if rank is None:  # stopped or failed before it was handled: nothing to queue
             return True
@@ -172,6 +172,10 @@ class RunQueue:
         self.wake()
 
     async def _resume(self, message: dict) -> None:
+        await self.resume()
+
+    async def resume(self) -> None:
+        """After an emergency stop: runs waiting may start again."""
         self.held = False
         # Runs queued while this message was on its way were marked held too.
         await database_sync_to_async(_unhold)(self.agent.name)
@@ -181,8 +185,11 @@ class RunQueue:
     # -- the work ---------------------------------------------------------------------------
 
     def _busy_for(self, user: str) -> bool:
-        """Another user's program, or another person driving by hand, holds the robot."""
+        """Another user's program, or another person driving by hand, holds the robot (or
+        an emergency stop does: then every run waits, held, until it is resumed)."""
         holder = self.agent.lease.holder
+        if self.agent.lease.estopped:
+            return True
         if holder is None or holder.kind == "bridge" or holder.user == user:
             return False
         return not self._robot_free()
@@ -402,13 +409,10 @@ def move(user, run: Run, rank: int) -> int:
     return placed
 
 
-def resume(user, robot: Robot) -> int:
-    """After an emergency stop: the queue moves again. How many runs were waiting."""
-    if not may_manage(user, robot):
-        raise PermissionDenied("Only staff and the robot's owner resume its queue.")
+def unhold(robot: Robot) -> int:
+    """The runs held by an emergency stop wait as any others now (robots.stops.resume);
+    how many there were. The pages hear of it; the agent is told by the caller."""
     count = Run.queue_of(robot.pk).filter(reason=Run.HELD).update(reason="")
-    with contextlib.suppress(Exception):  # the agent away: it reads the queue when back
-        tell_agent_sync(robot.name, RESUME)
     _changed(robot.name, tell_agent=False)
     return count
 

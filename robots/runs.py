@@ -2,6 +2,7 @@
 message to its robot's agent, or a step of the robot's queue."""
 
 from channels.exceptions import ChannelFull
+from django.core.exceptions import PermissionDenied
 from django.db import transaction
 
 from programs.models import Program, Run
@@ -11,7 +12,12 @@ from robots.models import Robot
 
 
 def start_run(program: Program, robot: Robot, user, args=()) -> Run:
-    """Create the run and hand it to the robot's agent (which owns the process)."""
+    """Create the run and hand it to the robot's agent (which owns the process).
+    PermissionDenied if `user` may see the robot but not drive it."""
+    if not robot.drivable_by(user):
+        raise PermissionDenied(
+            f"Only {robot.get_drive_by_display()} may run programs on {robot.name}."
+        )
     language = program.lang
     if not language.available:
         raise RunRefused(

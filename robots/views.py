@@ -11,12 +11,12 @@ from django.views.decorators.http import require_POST
 
 from programs.access import get_program_for_user, programs_for_user, runs_for_user
 from programs.models import Run, ordinal
-from robots import gateway_views, run_queue
+from robots import gateway_views, run_queue, stops
 from robots.bus import AgentUnavailable, ask_agent_sync, reconfigure_sync
 from robots.camera import has_camera
 from robots.driver_settings import current_values
 from robots.forms import ButtonForm, RobotConfigForm
-from robots.models import RobotButton, get_robot_for_user, robots_for_user
+from robots.models import RobotButton, RobotStop, get_robot_for_user, robots_for_user
 from robots.readings import sensor_rows, show_items, status
 from robots.runs import RunRefused, start_run
 
@@ -40,6 +40,7 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
         "running": runs_for_user(request.user).filter(robot=robot, state__in=Run.ACTIVE),
         "programs": programs_for_user(request.user),
         **queue_context(request.user, robot),
+        **stop_context(request.user, robot),
     }
     # The state now, so the page is whole before (or without) its websocket.
     try:
@@ -56,6 +57,18 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
     # The gateway card once, server-side; it then reloads itself (robots/_gateway.html).
     context["gateway"] = gateway_views.gateway_context(robot, away="agent_error" in context)
     return render(request, "robots/detail.html", context)
+
+
+def stop_context(user, robot) -> dict:
+    """Its emergency stop in force, if any; who may press and resume it; its recent ones."""
+    pressed = RobotStop.pressed(robot.pk)
+    return {
+        "pressed": pressed,
+        "may_estop": robot.stoppable_by(user),
+        "may_resume": pressed is not None and stops.may_resume(user, robot, pressed),
+        "may_drive": robot.drivable_by(user),
+        "stops": stops.recent(robot),
+    }
 
 
 def queue_context(user, robot) -> dict:
@@ -94,7 +107,7 @@ def robot_queue_move(request: HttpRequest, name: str) -> HttpResponse:
 def robot_queue_resume(request: HttpRequest, name: str) -> HttpResponse:
     """After an emergency stop, staff or the robot's owner let the queue move again."""
     robot = get_robot_for_user(request.user, name)
-    count = run_queue.resume(request.user, robot)
+    count = stops.resume(request.user, robot, "the robot's page")
     return _queue_outcome(request, robot, info=f"The queue moves again ({count} waiting).")
 
 
@@ -190,13 +203,24 @@ def robot_settings(request: HttpRequest, name: str) -> HttpResponse:
 def robot_estop(request: HttpRequest, name: str) -> HttpResponse:
     robot = get_robot_for_user(request.user, name)
     try:
-        stopped = ask_agent_sync(robot.name, "robot.estop")["stopped"]
+        record = stops.press(request.user, robot, "the robot's page")
     except AgentUnavailable as exc:
-        messages.error(request, str(exc))
+        messages.error(request, f"{exc} The press is recorded; the robot's own stop is not sure.")
     else:
         messages.warning(
-            request, f"Emergency stop: {robot.name} stopped, {stopped} program(s) ended."
+            request,
+            f"Emergency stop: {robot.name} stopped, {len(record.runs)} program(s) ended."
+            " Nothing moves it until it is resumed.",
         )
+    return redirect("robot-detail", robot.name)
+
+
+@login_required
+@require_POST
+def robot_resume(request: HttpRequest, name: str) -> HttpResponse:
+    robot = get_robot_for_user(request.user, name)
+    count = stops.resume(request.user, robot, "the robot's page")
+    messages.info(request, f"{robot.name} may move again ({count} run(s) waiting).")
     return redirect("robot-detail", robot.name)
 
 
@@ -207,7 +231,7 @@ def robot_run(request: HttpRequest, name: str) -> HttpResponse:
     program = get_program_for_user(request.user, request.POST.get("program"))
     try:
         run = start_run(program, robot, request.user)
-    except RunRefused as exc:
+    except (RunRefused, PermissionDenied) as exc:
         messages.error(request, str(exc))
         return redirect("robot-detail", robot.name)
     return redirect("run-detail", run.pk)

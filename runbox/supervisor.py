@@ -202,6 +202,18 @@ class RunProcess:
         self._signal_group(signal.SIGTERM)
         self._kill_handle = asyncio.get_running_loop().call_later(self.grace, self._kill_late)
 
+    def kill(self, reason: str, state: str = "stopped") -> None:
+        """SIGKILL to every process of the run now, no grace (an emergency stop); it ends
+        with `reason` even if a gentler stop was under way."""
+        if not self.running:
+            return
+        if self._kill_handle is not None:
+            self._kill_handle.cancel()
+        if self._stop_reason is None or self._stop_reason != reason:
+            self.system_line(f"{reason}: sending SIGKILL")
+        self._stop_reason, self._stop_state = reason, state
+        self._signal_group(signal.SIGKILL)
+
     async def wait(self) -> Outcome:
         await asyncio.shield(self._done)
         return self.outcome()

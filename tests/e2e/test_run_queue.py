@@ -194,8 +194,8 @@ async def test_an_emergency_stop_holds_the_queue_until_it_is_resumed(robot_on):
 
     assert (await ask_agent("sim", "robot.estop"))["stopped"] == 1
     await in_state(first, "stopped")
-    assert agent.lease.holder is None
-    await asyncio.sleep(1)  # the robot is free, yet nothing starts on its own
+    assert agent.lease.estopped
+    await asyncio.sleep(1)  # its program is gone, yet nothing starts on its own
     assert (await fresh(second)).state == "queued" and second.reason == Run.HELD
     # Another run asked for meanwhile waits behind it, held too.
     third = await run_program(alice, robot, SLEEPS)

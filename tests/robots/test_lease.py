@@ -53,5 +53,18 @@ def test_staff_take_over_and_only_the_holder_releases(lease):
     assert lease.release("chan-b") is False
     assert lease.acquire(STAFF, take_over=True) is True
     assert lease.holder == STAFF
-    assert lease.clear() is True and lease.holder is None
-    assert lease.clear() is False
+    assert lease.release(STAFF.key) is True and lease.holder is None
+    assert lease.release(STAFF.key) is False
+
+
+def test_an_emergency_stop_holds_it_from_everyone_until_resumed(lease):
+    lease.acquire(ALICE_RUN)
+    lease.estop("carol")
+    assert lease.estopped and lease.holder.user == "carol"
+    for who, kwargs in ((ALICE_RUN, {}), (STAFF, {"take_over": True})):
+        with pytest.raises(LeaseHeld, match="the emergency stop carol pressed"):
+            lease.acquire(who, **kwargs)
+    assert lease.release(ALICE_RUN.key) is False and lease.release("estop") is False
+    assert lease.end_estop() is True and lease.holder is None
+    assert lease.end_estop() is False
+    assert lease.acquire(ALICE_RUN) is True

@@ -251,7 +251,7 @@ def test_a_held_queue_says_so_and_its_manager_resumes_it(lab):
     response = olga.post("/robots/arm/queue/resume")
     assert response.status_code == 302
     assert set(Run.objects.filter(pk__in=[a.pk, b.pk]).values_list("reason", flat=True)) == {""}
-    assert "run.queue_resume" in agent_messages(robot)
+    assert "robot.resume" in agent_messages(robot)
     assert not run_queue.held(robot)
 
 
