@@ -255,12 +255,13 @@ def robot_group(name: str) -> str:
 
 def robots_for_user(user):
     """The robots ``user`` may use: those of no class in particular, those of their classes
-    (as a member or a teacher), and all of them for admins."""
+    (as a member or a teacher), those they own, and all of them for admins."""
     if not user.is_authenticated:
         return Robot.objects.none()
     if user.is_superuser:
         return Robot.objects.all()
     mine = models.Q(groups__user=user) | models.Q(groups__teachers__user=user)
+    mine |= models.Q(owner=user)  # who looks after it sees it, whatever its classes
     return Robot.objects.filter(models.Q(groups__isnull=True) | mine).distinct()
 
 
