@@ -45,6 +45,7 @@ class Stats:
     bytes_out: int = 0
     drops: int = 0  # frames not sent: queue full, filtered, read-only
     parse_errors: int = 0
+    refused: int = 0  # commands its guard did not let through (no control of the vehicle)
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -86,6 +87,9 @@ class Endpoint:
     stats: Stats = field(default_factory=Stats)
     systems: dict = field(default_factory=dict)  # (sysid, compid) -> last seen (monotonic)
     id: int = field(default_factory=lambda: next(_ids))
+    # guard(frame, msgid, sender, target) -> bool: whether a frame it sent may go on; None
+    # lets all through (robots/gateway.py guards programs' and ground stations' commands).
+    guard: object = None
 
     def __post_init__(self):
         self.router: Router | None = None
@@ -94,6 +98,7 @@ class Endpoint:
         self._pending: list[bytes] = []
         self.rates = Rates()
         self.last_error = ""
+        self.commanded_at: float | None = None  # when its guard last let a command through
 
     # -- the router calls these
     async def start(self) -> None:
@@ -176,6 +181,7 @@ class Endpoint:
             "error": self.last_error,
             "stats": self.stats.as_dict(),
             "rates": dict(self.rates.per_second),
+            "commanding": None if self.commanded_at is None else round(now - self.commanded_at, 1),
             "systems": [
                 {"system": sysid, "component": compid, "seen": round(now - seen, 1)}
                 for (sysid, compid), seen in sorted(self.systems.items())
@@ -223,6 +229,7 @@ class Router:
         touched = set()
         routed = [] if self.taps else None
         seen = source.systems
+        guard = source.guard
         now = time.monotonic()
         for frame, sysid, compid, msgid, tsys, tcomp in frames:
             key = (sysid, compid)
@@ -232,6 +239,9 @@ class Router:
                 seen[key] = now
             if source.read_only or not source.accepts(msgid):
                 stats.drops += 1
+                continue
+            if guard is not None and not guard(frame, msgid, key, (tsys, tcomp)):
+                stats.refused += 1
                 continue
             if routed is not None:
                 routed.append(frame)
@@ -410,6 +420,21 @@ class UdpEndpoint(Endpoint):
                     sock.send(data)
             except (BlockingIOError, ConnectionRefusedError):
                 self.stats.drops += 1  # a datagram's worth: the peer is away or behind
+
+
+@dataclass(eq=False)
+class BoundUdpEndpoint(UdpEndpoint):
+    """A UDP server on a socket bound elsewhere: a run's 127.0.0.1 port, made inside its own
+    network namespace (runbox), served here as any other endpoint."""
+
+    sock: object = None
+    mode: str = "server"
+
+    async def start(self):
+        self._sock = self.sock
+        self._sock.setblocking(False)
+        self.bound = self._sock.getsockname()[:2]
+        asyncio.get_running_loop().add_reader(self._sock.fileno(), self._readable)
 
 
 @dataclass(eq=False)

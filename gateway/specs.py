@@ -3,7 +3,10 @@
     {"type": "udp" | "tcp", "mode": "server" | "client", "address": "host:port"}
     {"type": "serial", "device": "/dev/ttyACM0", "baud": 57600}
 
-with optional ``read_only``, ``allow`` and ``block`` (lists of MAVLink message ids).
+with optional ``read_only``, ``allow`` and ``block`` (lists of MAVLink message ids), and
+``control``: whether what it sends may command the vehicle — ``always`` (a pilot's ground
+station must be able to take over), ``lease`` (only while no program holds the robot, and
+never after an emergency stop) or ``never`` (telemetry and reads only; gateway.control).
 ``check`` says what is wrong in words a user can act on; ``build`` makes the router's endpoint.
 """
 
@@ -20,6 +23,7 @@ from gateway.router import (
 
 TYPES = ("udp", "tcp", "serial")
 MODES = ("server", "client")
+CONTROLS = ("always", "lease", "never")
 BAUDS = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000, 921600,
          1000000, 1500000, 2000000, 3000000)  # fmt: skip
 MAX_MSGID = (1 << 24) - 1  # MAVLink 2 message ids are 24 bits
@@ -51,6 +55,10 @@ def check(spec: dict) -> dict:
             raise ValueError(f"a client needs the port to send to: {address!r}")
         clean.update(mode=mode, address=address)
     clean["read_only"] = _flag(spec.get("read_only", False))
+    control = spec.get("control", "always")
+    if control not in CONTROLS:
+        raise ValueError(f"control must be one of {', '.join(CONTROLS)}, not {control!r}")
+    clean["control"] = control
     allow = spec.get("allow")
     clean["allow"] = None if allow is None else _message_ids("allow", allow)
     clean["block"] = _message_ids("block", spec.get("block") or [])

@@ -36,7 +36,7 @@ from robots import messages, rpc
 from robots.bridges import Bridges
 from robots.bus import MANAGER_CHANNEL, RUNS_GROUP, run_group
 from robots.camera import CameraHub
-from robots.gateway import Gateway
+from robots.gateway import Gateway, RunLink
 from robots.lease import ControlLease, Holder, LeaseHeld
 from robots.models import Robot, RobotStop, agent_channel, robot_group
 from robots.robot_api import RobotApi
@@ -74,6 +74,7 @@ class BoxKind:
     limits: launcher.Limits
     services: tuple[str, ...]  # "tcp:7010", "udp:14551": what its 127.0.0.1 offers
     grace: float
+    mavlink: str = ""  # the service of these that is the run's own MAVLink endpoint
 
 
 @dataclass
@@ -445,6 +446,9 @@ class RobotAgent:
         active = ActiveRun(run_id, token, process, user=message.get("user", ""))
         self.runs[run_id] = active
         self.tokens[token] = active
+        for served in process.box.served:
+            if isinstance(served, RunLink):  # its MAVLink endpoint: this run's from now
+                served.belongs_to(run_id, active.user)
         try:
             await process.begin(
                 launch, gate, log_path=directory / "output.log",
@@ -466,10 +470,13 @@ class RobotAgent:
         services: list[str] = []
         if self.isolation.network != "none":
             services = [f"tcp:{ROBOT_API_PORT}", *self.isolation.policy.loopback_ports]
-            if "ROBOT_MAVLINK" in program_env:  # udpout:127.0.0.1:PORT, the programs' endpoint
-                services.append(f"udp:{program_env['ROBOT_MAVLINK'].rsplit(':', 1)[1]}")
+        mavlink = ""
+        if self.isolation.network != "none" and "ROBOT_MAVLINK" in program_env:
+            # udpout:127.0.0.1:PORT: the run's own endpoint, at the programs' endpoint's port
+            mavlink = f"udp:{program_env['ROBOT_MAVLINK'].rsplit(':', 1)[1]}"
+            services.append(mavlink)
         grace = float(self.limits["stop_grace_seconds"])
-        return BoxKind(self.isolation, limits, tuple(dict.fromkeys(services)), grace)
+        return BoxKind(self.isolation, limits, tuple(dict.fromkeys(services)), grace, mavlink)
 
     def _make_box(self, name: str, kind: "BoxKind") -> RunProcess:
         """A run's box, not spawned yet: bubblewrap (or the rootless inbox) and its cgroup."""
@@ -479,7 +486,7 @@ class RobotAgent:
                 kind.isolation,
                 socket_dir=self.socket_dir,
                 disk_mb=kind.limits.disk_mb,
-                listeners=[self._listener(service) for service in kind.services],
+                listeners=[self._listener(service, kind.mavlink) for service in kind.services],
                 seccomp_fd=seccomp.open_filter_fd(),
                 cgroup=cgroup,
                 rlimits=kind.limits.rlimits(address_space=cgroup is None),
@@ -513,10 +520,13 @@ class RobotAgent:
         except (cgroups.CgroupError, OSError) as exc:
             raise IsolationUnavailable(f"its cgroup could not be made: {exc}") from None
 
-    def _listener(self, service: str) -> Listener:
-        """What the run's robot gives programs on 127.0.0.1 inside the run's namespace."""
+    def _listener(self, service: str, mavlink: str = "") -> Listener:
+        """What the run's robot gives programs on 127.0.0.1 inside the run's namespace: the
+        Robot API, the run's own MAVLink endpoint (`mavlink`: its service), relays."""
         if service == f"tcp:{ROBOT_API_PORT}":
             return Listener(service, self.server.serve_socket)
+        if service == mavlink:
+            return Listener(service, self.gateway.serve_run)
         return Listener(service, partial(relay_to_host, service))
 
     async def _watch(self, active: ActiveRun) -> None:

@@ -7,7 +7,6 @@ from programs.access import programs_for_user
 from robots.driver_settings import add_option_fields, check_settings, known_driver, settings_from
 from robots.models import RUN_SETTINGS, Robot, RobotButton
 
-
 WHO_FIELDS = ("drive_by", "estop_by")
 
 

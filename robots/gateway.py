@@ -1,9 +1,17 @@
 """A robot agent's MAVLink gateway: the router that shares a mavlink:// robot's vehicle link.
 
 Its endpoints: the vehicle link (the robot's URL), the RHAL driver (an endpoint inside this
-process), and the robot's GatewayEndpoint rows: by default one for ground stations and one
-for the programs run here, whose address reaches them as ``ROBOT_MAVLINK``. Rows are applied
-at start and on ``gateway.reload``; ``gateway.stats`` answers with every endpoint's live stats.
+process), the robot's GatewayEndpoint rows (by default one for ground stations and one for
+programs, whose port reaches runs as ``ROBOT_MAVLINK``), and one endpoint per run: the UDP
+socket at that port in the run's own network namespace (``serve_run``), which no other run or
+robot reaches. Rows are applied at start and on ``gateway.reload``; ``gateway.stats`` answers
+with every endpoint's live stats.
+
+Who may command the vehicle (gateway.control tells a command from a read): a run, while it
+holds the robot's control lease (its first command takes a free one, as drive() does; a
+refused COMMAND_LONG/INT is answered DENIED), never after an emergency stop; a ground
+station as its row's ``control`` says: ``always`` (a pilot must be able to take over),
+``lease`` (while no program holds the robot, and not after an emergency stop) or ``never``.
 """
 
 from __future__ import annotations
@@ -17,9 +25,11 @@ from channels.db import database_sync_to_async
 from django.conf import settings
 
 from gateway import specs
+from gateway.control import commands_vehicle, denied_ack
 from gateway.local import RouterLink, open_local_link
-from gateway.router import Endpoint, Router, TcpServerEndpoint
+from gateway.router import BoundUdpEndpoint, Endpoint, Router, TcpServerEndpoint
 from gateway.tlog import TlogRecorder
+from robots.lease import Holder, LeaseHeld
 from robots.models import GatewayEndpoint, Robot
 
 log = logging.getLogger(__name__)
@@ -124,12 +134,42 @@ class Gateway:
         self.failed.pop(row_id, None)
         try:
             endpoint = specs.build(spec, name=specs.describe(spec))
+            endpoint.guard = self._station_guard(spec["control"], endpoint)
             await self.router.add(endpoint)
         except (OSError, ValueError) as exc:  # in use, no such host: this endpoint alone
             self.failed[row_id] = (spec, str(exc) or type(exc).__name__)
             log.warning("agent %s: endpoint %s: %s", self.agent.name, row_id, exc)
             return
         self.running[row_id] = (spec, endpoint)
+
+    # -- who commands the vehicle ---------------------------------------------------------------
+
+    def _station_guard(self, control: str, endpoint: Endpoint):
+        """A row's guard: its commands pass as ``control`` says, and are noted (the robot's
+        page shows a ground station commanding)."""
+        lease = self.agent.lease
+
+        def guard(frame, msgid, sender, target) -> bool:
+            if not commands_vehicle(frame, msgid):
+                return True
+            if control == "never" or (control == "lease" and lease.holder is not None
+                                      and lease.holder.kind in ("run", "estop")):  # fmt: skip
+                _answer_denied(endpoint, frame, msgid, sender, target)
+                return False
+            endpoint.commanded_at = time.monotonic()
+            return True
+
+        return guard
+
+    async def serve_run(self, sock) -> RunLink:
+        """A run's own endpoint, on the UDP socket its box bound at ROBOT_MAVLINK's port (a
+        box is made before its run: RunLink.belongs_to names the run when it begins)."""
+        link = RunLink(self, sock)
+        if self.router is None:
+            sock.close()  # not a MAVLink robot (any more): nothing to reach
+            return link
+        await self.router.add(link.endpoint)
+        return link
 
     # -- what others ask -----------------------------------------------------------------------
 
@@ -206,6 +246,55 @@ class Gateway:
         self.running.clear()
         self.failed.clear()
         self.link = None
+
+
+class RunLink:
+    """One run's MAVLink endpoint: its reads always pass, its commands only while its run
+    holds the robot's control lease."""
+
+    def __init__(self, gateway: Gateway, sock):
+        self.gateway = gateway
+        self.run_id: int | None = None  # none yet: a box made ahead, waiting for its run
+        self.user = ""
+        self.endpoint = BoundUdpEndpoint(name="a run (not begun)", sock=sock, guard=self._guard)
+
+    def belongs_to(self, run_id: int, user: str) -> None:
+        self.run_id, self.user = run_id, user
+        self.endpoint.name = f"run #{run_id}"
+
+    def _guard(self, frame, msgid, sender, target) -> bool:
+        if not commands_vehicle(frame, msgid) or self._may_command():
+            return True
+        _answer_denied(self.endpoint, frame, msgid, sender, target)
+        return False
+
+    def _may_command(self) -> bool:
+        agent = self.gateway.agent
+        active = agent.runs.get(self.run_id)
+        if active is None or agent.tokens.get(active.token) is not active:
+            return False  # not begun, ended, or emergency-stopped
+        if active.process.stop_requested:
+            return False  # asked to stop: it may clean up, not command
+        try:  # the first command takes a free lease, as drive() does
+            agent.take_lease(Holder("run", self.run_id, self.user))
+        except LeaseHeld:
+            return False
+        return True
+
+    async def close(self) -> None:
+        router = self.gateway.router
+        if router is not None and self.endpoint.id in router.endpoints:
+            await router.remove(self.endpoint)
+        else:
+            await self.endpoint.stop()
+
+
+def _answer_denied(endpoint: Endpoint, frame, msgid, sender, target) -> None:
+    """A refused command that waits for an answer (COMMAND_LONG/INT) is told DENIED."""
+    ack = denied_ack(frame, msgid, sender, target)
+    if ack is not None:
+        with contextlib.suppress(OSError):
+            endpoint.send([ack])
 
 
 def recordings_dir(robot_name: str):

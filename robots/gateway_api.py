@@ -38,6 +38,10 @@ class EndpointIn(Body):
     read_only: StrictBool = False
     allow: list[int] | None = Field(None, description="only these message ids pass")
     block: list[int] = Field([], description="these message ids never pass")
+    control: str = Field(
+        "always", description="may it command the vehicle: always, lease (while no program"
+        " holds the robot) or never", json_schema_extra={"enum": specs.CONTROLS},
+    )  # fmt: skip
 
     @model_validator(mode="after")
     def usable(self):
@@ -59,6 +63,10 @@ class EndpointOut(Schema):
     read_only: bool = False
     allow: list[int] | None = None
     block: list[int] = []
+    control: str = "always"
+    commanding: float | None = Field(
+        None, description="seconds since it last commanded the vehicle (a ground station)"
+    )
     status: str = Field(description="up, connecting, down, error, or unknown (agent away)")
     error: str = ""
     bound: str | None = Field(None, description="the address a server listens on")
@@ -69,7 +77,8 @@ class EndpointOut(Schema):
     clients: list[dict] | None = None
 
 
-LIVE_KEYS = ("status", "error", "bound", "stats", "rates", "systems", "peers", "clients")
+LIVE_KEYS = ("status", "error", "bound", "stats", "rates", "systems", "peers", "clients",
+             "commanding")  # fmt: skip
 
 
 MAVLINK_SCHEMES = ("mavlink", "mavlink+tcp", "mavlink+udp")

@@ -189,6 +189,7 @@ def endpoint_spec(form) -> dict:
     if allow:
         spec["allow"] = allow
     spec["block"] = _message_ids("block", form.get("block", ""))
+    spec["control"] = form.get("control", "always").strip() or "always"
     return specs.check(spec)
 
 

@@ -186,6 +186,12 @@ class GatewayEndpoint(models.Model):
         null=True, blank=True, help_text="Only these message ids pass (JSON list); empty: all"
     )
     block = models.JSONField(default=list, blank=True, help_text="These message ids never pass")
+    control = models.CharField(
+        max_length=10, default="always",
+        choices=[("always", "always"), ("lease", "while no program holds the robot"),
+                 ("never", "never: telemetry and reads only")],
+        help_text="May what it sends command the vehicle (arm, modes, setpoints...)",
+    )  # fmt: skip
     role = models.CharField(max_length=10, blank=True, choices=ROLES, editable=False)
     created = models.DateTimeField(default=timezone.now, editable=False)
 
@@ -203,7 +209,7 @@ class GatewayEndpoint(models.Model):
     def spec(self) -> dict:
         """As gateway.specs describes endpoints."""
         spec = {"type": self.type, "read_only": self.read_only, "allow": self.allow}
-        spec["block"] = self.block or []
+        spec["block"], spec["control"] = self.block or [], self.control
         if self.type == "serial":
             spec.update(device=self.device, baud=self.baud)
         else:
@@ -216,6 +222,7 @@ class GatewayEndpoint(models.Model):
         self.mode, self.address = spec.get("mode", ""), spec.get("address", "")
         self.device, self.baud = spec.get("device", ""), spec.get("baud")
         self.read_only, self.allow, self.block = spec["read_only"], spec["allow"], spec["block"]
+        self.control = spec.get("control", "always")
 
 
 class SerialBridge(models.Model):

@@ -194,7 +194,8 @@ def test_the_owner_adds_an_endpoint_with_a_plain_form(client, owner, rover, live
     assert response.status_code == 302 and response.url == f"/robots/{rover.name}/"
     added = rover.endpoints.get(role="")
     assert added.spec() == {"type": "udp", "mode": "client", "address": "127.0.0.1:14600",
-                            "read_only": True, "allow": None, "block": [66, 69]}  # fmt: skip
+                            "read_only": True, "allow": None, "block": [66, 69],
+                            "control": "always"}  # fmt: skip
     assert "gateway.reload" in live["asked"]
     page = client.get(response.url).content.decode()
     assert "Endpoint udp:127.0.0.1:14600 added" in page
