@@ -273,6 +273,14 @@ class SerialBridge:
             await self._server.wait_closed()
             self._server = None
 
+    def evict(self) -> int:
+        """Every client goes now (an emergency stop): the device is given back once they
+        have. How many there were."""
+        clients = [*self._clients, *self._waiting]
+        for client in clients:
+            client.transport.abort()
+        return len(clients)
+
     async def _drain_tasks(self) -> None:
         while self._tasks:
             for task in list(self._tasks):

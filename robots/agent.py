@@ -64,6 +64,7 @@ LINK_RETRY_MAX = 30.0  # seconds between tries to open a robot that is away
 # A hand drive lasts this long unless the browser repeats it: a page that hangs, loses its
 # network or is closed without a goodbye cannot leave the robot driving.
 TELEOP_DEADMAN = 0.4
+DRIVER_BACK_TIMEOUT = 2.0  # s an emergency stop waits for a bridge to give the device back
 
 
 @dataclass(frozen=True)
@@ -130,6 +131,7 @@ class RobotAgent:
         self.boxes = Ahead(self._make_box, self.cgroup_prefix)  # one made ahead of its run
         self.handlers.update(self.queue.handlers)
         self.lent_to: str | None = None  # a serial bridge client has the robot's device
+        self._driver_back = asyncio.Event()  # set while the driver has its device
         self._outbox: asyncio.Queue = asyncio.Queue()
         self._tasks: list[asyncio.Task] = []
         self._starting: set[asyncio.Task] = set()
@@ -232,6 +234,7 @@ class RobotAgent:
     async def lend_driver(self, to: str) -> None:
         """A serial bridge client takes the robot's device: the driver lets go of it."""
         self.lent_to = to
+        self._driver_back.clear()
         async with self._opening:
             try:
                 await self.driver.close()  # stops the motors first
@@ -242,7 +245,10 @@ class RobotAgent:
     async def take_driver_back(self) -> None:
         self.lent_to = None
         self.link_error = None
-        await self.open_robot()
+        try:
+            await self.open_robot()
+        finally:
+            self._driver_back.set()
 
     def _open_failed(self, exc: rhal.RhalError) -> bool:
         if str(exc) != self.link_error:
@@ -574,6 +580,10 @@ class RobotAgent:
             self._deadman.cancel()
         self.queue.hold()
         self._lease_changed()
+        if self.lent_to is not None:  # a serial bridge client has the device: it goes
+            self.bridges.evict()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._driver_back.wait(), DRIVER_BACK_TIMEOUT)
         try:
             await self.driver.stop()
         except rhal.RhalError:  # link down: the robot's own watchdog stops it

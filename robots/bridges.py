@@ -96,6 +96,11 @@ class Bridges:
             raise RuntimeError("the robot's driver does not share what it reads")
         return driver.tap_wire(feed)
 
+    def evict(self) -> int:
+        """An emergency stop: the clients of every bridge go, so the robot's device comes back
+        to its driver (whose stop goes on the wire then). How many clients there were."""
+        return sum(bridge.evict() for _, bridge in self.running.values())
+
     # -- what others ask --------------------------------------------------------------------------
 
     def stats(self) -> dict:

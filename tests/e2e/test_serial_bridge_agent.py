@@ -13,6 +13,7 @@ from django.contrib.auth.models import User
 
 from rhal import arcos
 from robots.agent import RobotAgent
+from robots.bus import ask_agent
 from robots.models import Robot, SerialBridge
 from tests.e2e.agents import finished, output_of, run_program, until
 from tests.rhal.arcos_emulator import ArcosEmulator
@@ -100,3 +101,36 @@ async def test_while_a_program_drives_a_client_watches_or_is_refused(pioneer_on_
     writer.close()
     agent.stop_run(run.pk, "test over")
     await finished(run)
+
+
+async def test_an_emergency_stop_sends_the_bridge_client_away_and_stops_the_robot(
+    pioneer_on_a_pty,
+):
+    """A client driving through the bridge holds the robot's device; the e-stop takes it back,
+    the driver's stop goes on the wire, and the client cannot come back to drive."""
+    emulator, agent, robot, bridge, user = pioneer_on_a_pty
+    port = bridge_port(agent, bridge)
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    await until(lambda: not agent.driver.is_open, what="the driver letting go of the port")
+    # The client connects to the robot and drives, as a client library would.
+    for command in (arcos.SYNC0, arcos.SYNC1, arcos.SYNC2):
+        writer.write(arcos.encode(command))
+        await writer.drain()
+        await asyncio.sleep(0.1)
+    for packet in (arcos.encode(arcos.OPEN), arcos.encode(arcos.ENABLE, 1),
+                   arcos.encode(arcos.VEL, 300)):  # fmt: skip
+        writer.write(packet)
+        await writer.drain()
+        await asyncio.sleep(0.1)
+    await until(lambda: emulator.vel == 300, what="VEL 300 through the bridge")
+    reply = await asyncio.wait_for(ask_agent("p3", "robot.estop", by=user.username), 10)
+    assert reply["stopped"] == 0
+    with contextlib.suppress(ConnectionResetError):  # the client was sent away: its end
+        await asyncio.wait_for(reader.read(), 5)  # of the stream comes (no TimeoutError)
+    assert agent.driver.is_open and agent.lease.estopped
+    assert emulator.vel == 0  # the driver's stop, on the wire
+    # Back again, it may watch (when_busy: read_only) but not take the robot.
+    again_reader, again_writer = await asyncio.open_connection("127.0.0.1", port)
+    await asyncio.sleep(0.5)
+    assert agent.driver.is_open and agent.lease.estopped
+    again_writer.close()
