@@ -166,6 +166,11 @@ class Appliance:
 
         return wait_for(done, timeout=timeout, what=f"run {run_id} in {states}")
 
+    def resume(self, robot: str = "sim") -> None:
+        """After a test's emergency stop: the robot may move again for the tests after it."""
+        response = self.api("POST", f"/api/robots/{robot}/resume")
+        assert response.status_code == 200, response.text
+
     def create_program(self, name: str, source: str, language: str = "python", token=None) -> dict:
         body = {"name": name, "language": language, "source": source}
         response = self.api("POST", "/api/programs", body, token=token)

@@ -382,6 +382,7 @@ def test_robot_page_shows_sensors_camera_and_program_drawings(page, appliance, s
     assert appliance.wait_run(run_id)["state"] == "stopped"
     expect(page.locator("#robot-running")).to_contain_text("No program is running.")
     screenshot(page, "robot-after-estop")
+    appliance.resume()
 
 
 def test_other_users_cannot_open_my_programs_or_runs(new_page, appliance):

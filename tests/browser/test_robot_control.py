@@ -77,6 +77,7 @@ def test_readings_and_plots_move_while_a_program_drives(page, appliance, screens
     screenshot(page, "robot-plots")
     page.get_by_role("button", name="EMERGENCY STOP").click()
     assert appliance.wait_run(run_id)["state"] == "stopped"
+    appliance.resume()  # it holds the robot until then
 
 
 def test_the_emergency_stop_ends_every_program_and_halts_the_robot(page, appliance, screenshot):
@@ -93,8 +94,10 @@ def test_the_emergency_stop_ends_every_program_and_halts_the_robot(page, applian
         assert appliance.wait_run(run_id)["state"] == "stopped"
     expect(running).to_contain_text("No program is running.")
     expect(reading(page, "velocity.angular")).to_have_attribute("data-value", "0.0")
-    expect(page.locator("#control")).to_contain_text("Nobody controls the robot")
+    expect(page.locator("#control")).to_contain_text("Controlled by the emergency stop admin")
     screenshot(page, "robot-after-estop-two-programs")
+    page.get_by_role("button", name="Resume: let it move again").click()
+    expect(page.locator("#control")).to_contain_text("Nobody controls the robot")
 
 
 def test_a_command_button_runs_its_program_with_its_arguments(page, appliance, screenshot):

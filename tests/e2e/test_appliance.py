@@ -140,6 +140,7 @@ def test_emergency_stop_stops_programs_and_motors(any_appliance):
     ended = app.wait_run(run["id"])
     assert ended["state"] == "stopped" and ended["reason"] == "emergency stop"
     assert app.api("GET", "/api/robots/sim/sensors").json()["velocity"]["angular"] == 0
+    app.resume()
 
 
 def test_bad_requests_get_clear_json_errors(any_appliance):
