@@ -286,12 +286,12 @@ class Run(models.Model):
     @classmethod
     def mark_lost(cls, robot_name: str) -> list[int]:
         """Runs a dead agent left unfinished: nothing is supervising them any more.
-        Queued runs are not among them: they never started, and wait for the agent again."""
-        lost = list(
-            cls.objects.filter(robot__name=robot_name, state__in=cls.ACTIVE).values_list(
-                "pk", flat=True
-            )
-        )
+        Queued runs are not among them: they never started, and wait for the agent again;
+        nor runs no agent has taken yet (asked of a robot whose agent is only starting:
+        their run.start waits for it; the presence watch fails one nobody takes)."""
+        active = cls.objects.filter(robot__name=robot_name, state__in=cls.ACTIVE)
+        untaken = models.Q(state=cls.State.STARTING, pid__isnull=True)
+        lost = list(active.exclude(untaken).values_list("pk", flat=True))
         cls.objects.filter(pk__in=lost).update(
             state=cls.State.LOST,
             reason="its robot agent stopped while it ran",

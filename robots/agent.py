@@ -20,6 +20,7 @@ import tempfile
 import zlib
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
+from datetime import timedelta
 from functools import partial
 from pathlib import Path
 from signal import SIGKILL
@@ -176,8 +177,18 @@ class RobotAgent:
             asyncio.create_task(self.queue.serve(), name=f"{self.name}-queue"),
         ]
         self.ready.set()
+        await self._take_untaken()
         self._box_ahead()
         log.info("agent %s: %s, Robot API on %s", self.name, robot.url, self.api_address)
+
+    async def _take_untaken(self) -> None:
+        """Runs asked of this robot before its agent listened (a robot added and run at
+        once; fleet mode's channel layer keeps nothing for whoever does not listen yet):
+        started from the database. A run.start that comes as well finds it taken."""
+        for message in await database_sync_to_async(untaken_runs)(self.name):
+            task = asyncio.create_task(self.start_run(message))
+            self._starting.add(task)
+            task.add_done_callback(self._starting.discard)
 
     async def _load_robot(self) -> Robot:
         """The robot's row, and what it says about runs here."""
@@ -749,6 +760,20 @@ def flat_units(specs: dict) -> dict[str, str]:
         else:
             units[name] = unit
     return units
+
+
+def untaken_runs(robot_name: str) -> list[dict]:
+    """The start messages of the runs waiting for this robot's agent to take them, asked
+    within AGENT_START_TIMEOUT (older ones the presence watch fails)."""
+    since = timezone.now() - timedelta(seconds=settings.AGENT_START_TIMEOUT)
+    runs = Run.objects.filter(
+        robot__name=robot_name, state=Run.State.STARTING, pid__isnull=True, created__gte=since
+    ).select_related("owner")
+    found = []
+    for run in runs.order_by("pk"):
+        with contextlib.suppress(Exception):  # e.g. its language is gone: the watch fails it
+            found.append(run.start_message())
+    return found
 
 
 def end_leftovers(run_id: int) -> None:

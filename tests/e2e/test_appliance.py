@@ -213,6 +213,22 @@ def test_staff_add_a_robot_and_its_agent_starts(any_appliance):
     assert app.api("POST", "/api/robots", body).status_code == 409
 
 
+def test_a_run_asked_of_a_robot_just_added_waits_for_its_agent(any_appliance):
+    """Added, then run at once, before its agent is up: the run waits (starting) and runs,
+    never `lost` (which is for runs whose process died with their agent). Ten times."""
+    app = any_appliance
+    program = app.create_program("first run", "print('first')\n")
+    for i in range(10):
+        name = f"fresh{app.mode}{i}"
+        assert app.api("POST", "/api/robots", {"name": name, "url": "sim://"}).status_code == 201
+        run = app.run_program(program["id"], robot=name)
+        assert run["state"] in ("starting", "running", "finished"), run
+        if app.mode == "split":  # fleet mode: the robot computer starts its agent after
+            app._spawn("agent", name)
+        ended = app.wait_run(run["id"])
+        assert ended["state"] == "finished", (i, ended)
+
+
 def test_sensors_of_an_unknown_robot(any_appliance):
     response = any_appliance.api("GET", "/api/robots/ghost/sensors")
     assert response.status_code == 404 and "ghost" in response.json()["detail"]
