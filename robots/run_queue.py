@@ -54,7 +54,7 @@ log = logging.getLogger(__name__)
 
 TICK = 0.25  # seconds between looks at the lease (a person gone idle) and the turn's end
 RETRY_DELAY = 1.0
-CHANGED, RESUME = "run.queue_changed", "run.queue_resume"  # RESUME: agents of old send it
+CHANGED, RESUME = "run.queue_changed", "run.queue_resume"  # RESUME: web tiers of old
 
 
 def turn_seconds(robot_settings: dict) -> float:

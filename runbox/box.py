@@ -132,7 +132,6 @@ class Box:
         self.served: list = []
         self.nat: asyncio.subprocess.Process | None = None
         self._joining: asyncio.Future | None = None  # the processes joining the cgroup
-        self.launched = False
 
     def stdin(self) -> int | None:
         """What its first process reads (None: /dev/null)."""
@@ -322,7 +321,6 @@ class BwrapBox(Box):
         try:
             script = shell_script(launch, self.in_force.HOME)
             await _pass(gate)
-            self.launched = True
             view = memoryview(script)
             while view:  # the shell reads as it goes: a long script does not block for long
                 view = view[os.write(self.script_w, view) :]
@@ -425,7 +423,6 @@ class RootlessBox(Box):
     async def go(self, launch: Launch, gate=None) -> None:
         try:
             await _pass(gate)
-            self.launched = True
             run = {
                 "filename": launch.filename, "argv": launch.argv, "env": launch.env,
                 "source": base64.b64encode(launch.source).decode(),

@@ -13,15 +13,14 @@ import time
 import pytest
 from channels.db import database_sync_to_async
 from channels.testing import WebsocketCommunicator
-from django.test import Client
 
 from programs.models import Run
-from robotide.models import ApiToken
 from robots.consumers import RobotConsumer
 from robots.runs import request_stop
 from tests.e2e.agents import run_program, until
 from tests.e2e.test_run_queue import api, fresh, in_state
 from tests.peers import KINDS
+from tests.robots.test_run_queue import api as token_api
 
 pytestmark = pytest.mark.django_db(transaction=True)
 
@@ -84,15 +83,8 @@ async def state_after(run: Run, wanted: str, timeout: float) -> float:
 
 async def api_client(user):
     """`await call(method, path)` -> (status, body), as `user` with a token of theirs."""
-    _, token = await database_sync_to_async(ApiToken.issue)(user)
-    client = Client(HTTP_AUTHORIZATION=f"Bearer {token}")
-
-    @database_sync_to_async
-    def call(method: str, path: str):
-        response = getattr(client, method.lower())(path, content_type="application/json")
-        return response.status_code, response.json()
-
-    return call
+    call = await database_sync_to_async(token_api)(user)
+    return database_sync_to_async(call)
 
 
 def robot_page(kind, user) -> WebsocketCommunicator:

@@ -8,8 +8,9 @@ from django.contrib.auth.models import Group, User
 from django.test import Client
 
 from programs.models import Program, Run
-from robotide.models import ApiToken, ClassTeacher
+from robotide.models import ClassTeacher
 from robots.models import Robot, RobotStop
+from tests.robots.test_run_queue import api
 
 pytestmark = pytest.mark.django_db
 
@@ -31,17 +32,6 @@ def lab():
     robot = Robot.objects.create(name="arm", url="sim://", owner=users["olga"])
     robot.groups.add(group)
     return users, robot
-
-
-def api(user):
-    _, token = ApiToken.issue(user)
-    client = Client(HTTP_AUTHORIZATION=f"Bearer {token}")
-
-    def call(method, path, body=None):
-        response = getattr(client, method.lower())(path, body, content_type="application/json")
-        return response.status_code, response.json()
-
-    return call
 
 
 def program_of(user) -> Program:
