@@ -50,6 +50,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from rhal.base import Robot
 from rhal.errors import RhalError, RobotConnectionError
 from rhal.kinematics import compass_heading, normalize_angle
+from rhal.linked import LinkKeeper, StreamLink
 from rhal.mavlink_control import VELOCITY_YAW_RATE_MASK as VELOCITY_YAW_RATE_MASK
 from rhal.mavlink_control import MavlinkControl, VehicleControlError
 from rhal.mavlink_links import (
@@ -59,7 +60,6 @@ from rhal.mavlink_links import (
     _new_parser,
     _parse_url,
     _positive,
-    _StreamLink,
 )
 from rhal.mavlink_telemetry import MavlinkTelemetry
 
@@ -67,7 +67,6 @@ COMPONENT = mavlink2.MAV_COMP_ID_MISSIONPLANNER  # 190, the usual component id o
 HEARTBEAT_PERIOD = 1.0  # s: our HEARTBEAT, for the autopilot's GCS failsafe
 FIRST_TELEMETRY_WAIT = 1.0  # s that opening waits for the first ATTITUDE, if it comes
 TEXTS_KEPT = 5  # STATUSTEXTs kept for the "messages" reading
-BACKOFF_FIRST, BACKOFF_MAX = 0.2, 5.0  # s between reconnection attempts, doubling
 
 #: Telemetry asked for with MAV_CMD_SET_MESSAGE_INTERVAL: message id -> Hz.
 TELEMETRY_RATES = {
@@ -136,9 +135,14 @@ class MavlinkRobot(MavlinkControl, MavlinkTelemetry, Robot):
         self._mav = mavlink2.MAVLink(None, srcSystem=self.sysid, srcComponent=COMPONENT)
         self._parser = _new_parser()
         self._old_errors = 0  # bad frames counted by the parsers of earlier links
-        self._link: _Link | None = None
-        self._lost = "not connected yet"  # why self._link is None
-        self._task: asyncio.Task[None] | None = None
+        self._keeper: LinkKeeper[_Link] = LinkKeeper(
+            f"the mavlink vehicle at {url!r}",
+            connect=self._connect,
+            serve=self._serve,
+            halt=self._halt,
+            drop=_drop,
+            on_lost=lambda reason: self._link_gone(self._keeper.lost_error()),
+        )
         self._pending: dict[int, asyncio.Future[int]] = {}  # command id -> its ack's result
         self._engage_lock = asyncio.Lock()
         self._epoch = time.monotonic()
@@ -159,30 +163,21 @@ class MavlinkRobot(MavlinkControl, MavlinkTelemetry, Robot):
 
     @property
     def connected(self) -> bool:
-        return self._link is not None
+        return self._keeper.connected
 
     # -- hooks -----------------------------------------------------------------------------
 
     async def _open(self) -> None:
-        self._link = await self._connect()
-        self._task = asyncio.create_task(self._maintain(), name=f"mavlink link {self.url}")
+        await self._keeper.open()
 
     async def _close(self) -> None:
-        if self.disarm_on_close and self._we_armed and self._link is not None:
+        if self.disarm_on_close and self._we_armed and self.connected:
             # Best effort: the pump keeps streaming the zero setpoint meanwhile.
             with contextlib.suppress(RhalError, OSError):
                 await self._command(mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 0)
             self._we_armed = False
-        task, self._task = self._task, None
-        if task is not None:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
-        link, self._link = self._link, None
-        self._lost = "closed"
+        await self._keeper.close()
         self._link_gone(RobotConnectionError(f"robot {self.url!r} was closed"))
-        if link is not None:
-            await link.close()
 
     async def _drive(self, linear: float, angular: float) -> None:
         self._require_link()
@@ -341,11 +336,11 @@ class MavlinkRobot(MavlinkControl, MavlinkTelemetry, Robot):
             reader, writer = await serial_asyncio.open_serial_connection(
                 url=self.device, baudrate=self.baud
             )
-            return _StreamLink(reader, writer, self.timeout)
+            return StreamLink(reader, writer, self.timeout, "vehicle")
         host, port = self.address
         if self.listen is None:
             reader, writer = await asyncio.open_connection(host, port)
-            return _StreamLink(reader, writer, self.timeout)
+            return StreamLink(reader, writer, self.timeout, "vehicle")
         loop = asyncio.get_running_loop()
         if self.listen:
             bind = host or "0.0.0.0"
@@ -357,17 +352,6 @@ class MavlinkRobot(MavlinkControl, MavlinkTelemetry, Robot):
                 lambda: _DatagramLink((host, port)), remote_addr=(host, port)
             )
         return protocol
-
-    async def _maintain(self) -> None:
-        """Serve the link until it fails, then reconnect with backoff; until cancelled."""
-        link = self._link
-        while link is not None:
-            reason = await self._serve(link)
-            self._link, self._lost = None, reason
-            self._link_gone(self._lost_error())
-            await link.close()
-            link = await self._reconnect()
-            self._link = link
 
     async def _serve(self, link: _Link) -> str:
         """Read until the link fails or the vehicle goes quiet; return why."""
@@ -411,15 +395,12 @@ class MavlinkRobot(MavlinkControl, MavlinkTelemetry, Robot):
                     return
             await asyncio.sleep(max(0.0, min(next_heartbeat, next_setpoint) - time.monotonic()))
 
-    async def _reconnect(self) -> _Link:
-        delay = BACKOFF_FIRST
-        while True:
-            await asyncio.sleep(delay)
-            try:
-                return await self._connect()
-            except (OSError, RobotConnectionError) as exc:
-                self._lost = f"reconnecting failed: {exc}"
-                delay = min(2 * delay, BACKOFF_MAX)
+    async def _halt(self, link: _Link) -> None:
+        """A zero setpoint, if this link was moving the vehicle; a ground station's
+        guidance is not ours to interrupt."""
+        if self._streaming() or self._setpoint[:2] != (0.0, 0.0):
+            self._setpoint = (0.0, 0.0, self._next_stamp())
+            await link.send(self._setpoint_frame())
 
     def _link_gone(self, error: RhalError) -> None:
         """Forget what held only for that link; motion is not resumed after a reconnection."""
@@ -440,11 +421,8 @@ class MavlinkRobot(MavlinkControl, MavlinkTelemetry, Robot):
             raise RobotConnectionError(f"lost the link to {self.url!r}: {exc}") from exc
 
     def _require_link(self) -> _Link:
-        if self._link is None:
-            raise self._lost_error()
-        return self._link
+        return self._keeper.require()
 
-    def _lost_error(self) -> RobotConnectionError:
-        return RobotConnectionError(
-            f"no link to the mavlink vehicle at {self.url!r} ({self._lost}); reconnecting"
-        )
+
+async def _drop(link: _Link) -> None:
+    await link.close()

@@ -4,48 +4,18 @@ the URL that names one."""
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import math
 from typing import Any
 from urllib.parse import urlsplit
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from rhal.linked import StreamLink
+
 DEFAULT_DEVICE = "/dev/ttyACM0"
 DEFAULT_HOST, DEFAULT_TCP_PORT = "127.0.0.1", 5760
 DEFAULT_UDP_PORT = 14550
 WILDCARD_HOSTS = ("", "0.0.0.0", "::")
-
-
-class _StreamLink:
-    """TCP or serial: one StreamReader/StreamWriter pair."""
-
-    def __init__(
-        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, timeout: float
-    ) -> None:
-        self._reader, self._writer, self._timeout = reader, writer, timeout
-
-    async def read(self) -> bytes:
-        data = await self._reader.read(4096)
-        if not data:
-            raise ConnectionResetError("the vehicle closed the link")
-        return data
-
-    async def send(self, data: bytes) -> None:
-        if self._writer.is_closing():
-            raise ConnectionResetError("the link is closed")
-        self._writer.write(data)
-        # Bounded: a peer that stopped reading must not hang the pump or a drive().
-        async with asyncio.timeout(self._timeout):
-            await self._writer.drain()
-
-    def abort(self) -> None:
-        self._writer.transport.abort()
-
-    async def close(self) -> None:
-        self._writer.close()
-        with contextlib.suppress(OSError):
-            await self._writer.wait_closed()
 
 
 class _DatagramLink(asyncio.DatagramProtocol):
@@ -94,7 +64,7 @@ class _DatagramLink(asyncio.DatagramProtocol):
             self._transport.close()
 
 
-_Link = _StreamLink | _DatagramLink
+_Link = StreamLink | _DatagramLink
 
 
 def _new_parser() -> Any:

@@ -56,6 +56,7 @@ import nxt.sensor
 from rhal.base import Robot
 from rhal.errors import RobotConnectionError
 from rhal.kinematics import advance_pose, compass_heading
+from rhal.linked import LinkKeeper
 from rhal.nxt_links import BluetoothLink as BluetoothLink
 from rhal.nxt_links import DevFileLink as DevFileLink
 from rhal.nxt_links import ErrorCounter, parse_url
@@ -72,7 +73,6 @@ ULTRASONIC_MAX = 2.54  # m; 255 cm is the sensor's "nothing in reach"
 NOTHING_IN_REACH = 255  # cm
 START_POSE = (0.0, 0.0, math.pi / 2)  # where the robot is when opened, facing "north"
 BATTERY_EVERY = 10  # polls between battery readings: once a second at the default rate
-BACKOFF_FIRST, BACKOFF_MAX = 0.2, 5.0  # s between reconnection attempts, doubling
 #: answering with an error status is nxt.error.DirectProtocolError, a subclass.
 GARBLED = (nxt.error.ProtocolError, struct.error, ValueError, IndexError)
 
@@ -154,10 +154,15 @@ class NxtRobot(Robot):
         self.identity: dict[str, Any] = {}
         self._errors = ErrorCounter()
         self._executor: ThreadPoolExecutor | None = None
-        self._session: _Session | None = None
-        self._lost = "not connected yet"  # why self._session is None
+        self._keeper: LinkKeeper[_Session] = LinkKeeper(
+            f"the nxt robot at {url!r}",
+            connect=self._connect,
+            serve=self._serve,
+            halt=self._halt,
+            drop=self._drop_session,
+            reason=_reason,
+        )
         self._failure: str | None = None  # a command's write failed: the poller gives up
-        self._task: asyncio.Task[None] | None = None
         self._applied = (0.0, 0.0)
         self._reset_readings()
 
@@ -168,7 +173,7 @@ class NxtRobot(Robot):
 
     @property
     def connected(self) -> bool:
-        return self._session is not None
+        return self._keeper.connected
 
     def wheel_powers(self, linear: float, angular: float) -> tuple[int, int, float, float]:
         """(left power, right power, linear, angular) for these speeds.
@@ -203,29 +208,14 @@ class NxtRobot(Robot):
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="nxt")
         self._reset_readings()
         try:
-            session = await self._connect()
-            self._session = session
-            await self._poll(session)  # a first set of readings before open() returns
+            await self._keeper.open()
         except BaseException:
-            await self._drop_session()
             self._executor.shutdown(wait=False)
             self._executor = None
             raise
-        self._task = asyncio.create_task(self._maintain(), name=f"nxt link {self.url}")
 
     async def _close(self) -> None:
-        task, self._task = self._task, None
-        if task is not None:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
-        session = self._session
-        if session is not None:
-            # Braked motors hold their position on battery power: leave them off.
-            with contextlib.suppress(OSError, *GARBLED):
-                await self._call(session.motors_off)
-        await self._drop_session()
-        self._lost = "closed"
+        await self._keeper.close(goodbye=self._motors_off)
         executor, self._executor = self._executor, None
         if executor is not None:
             executor.shutdown(wait=False)
@@ -249,8 +239,7 @@ class NxtRobot(Robot):
                 raise
 
     async def _read_sensors(self) -> dict[str, Any]:
-        if self._session is None:
-            raise self._lost_error()
+        self._keeper.require()
         x, y, theta = self._pose
         readings: dict[str, Any] = {
             "position": {"x": x, "y": y, "theta": theta},
@@ -303,6 +292,15 @@ class NxtRobot(Robot):
         return await loop.run_in_executor(self._executor, function, *args)
 
     async def _connect(self) -> _Session:
+        session = await self._start_session()
+        try:
+            await self._poll(session)  # a first set of readings before the link counts as up
+        except BaseException:
+            await self._call(session.close)
+            raise
+        return session
+
+    async def _start_session(self) -> _Session:
         session = _Session(self)
         try:
             identity = await self._call(session.connect)
@@ -323,20 +321,19 @@ class NxtRobot(Robot):
         self._odometry_base = None  # counts go on from wherever they were
         return session
 
-    async def _drop_session(self) -> None:
-        session, self._session = self._session, None
-        if session is not None and self._executor is not None:
+    async def _drop_session(self, session: _Session) -> None:
+        if self._executor is not None:
             await self._call(session.close)
 
-    async def _maintain(self) -> None:
-        """Poll until the link fails, then reconnect with backoff; until cancelled."""
-        while True:
-            session = self._session
-            assert session is not None
-            reason = await self._serve(session)
-            self._lost = reason
-            await self._drop_session()
-            self._session = await self._reconnect()
+    async def _halt(self, session: _Session) -> None:
+        self._applied = (0.0, 0.0)
+        with contextlib.suppress(*GARBLED):
+            await self._call(session.stop, self.brake)
+
+    async def _motors_off(self, session: _Session) -> None:
+        # Braked motors hold their position on battery power: leave them off.
+        with contextlib.suppress(*GARBLED):
+            await self._call(session.motors_off)
 
     async def _serve(self, session: _Session) -> str:
         """Poll and keep the brick awake until the link fails; return why it did."""
@@ -359,20 +356,8 @@ class NxtRobot(Robot):
                 return self._failure
             await asyncio.sleep(max(0.0, started + period - time.monotonic()))
 
-    async def _reconnect(self) -> _Session:
-        delay = BACKOFF_FIRST
-        while True:
-            await asyncio.sleep(delay)
-            try:
-                return await self._connect()
-            except (OSError, RobotConnectionError) as exc:
-                self._lost = f"reconnecting failed: {_reason(exc)}"
-                delay = min(2 * delay, BACKOFF_MAX)
-
     async def _command(self, action: Callable[[_Session], None]) -> None:
-        session = self._session
-        if session is None:
-            raise self._lost_error()
+        session = self._keeper.require()
         try:
             await self._call(action, session)
         except OSError as exc:
@@ -386,11 +371,6 @@ class NxtRobot(Robot):
         except GARBLED:
             self._errors.add()
             return None
-
-    def _lost_error(self) -> RobotConnectionError:
-        return RobotConnectionError(
-            f"no link to the nxt robot at {self.url!r} ({self._lost}); reconnecting"
-        )
 
     # -- readings --------------------------------------------------------------------------
 

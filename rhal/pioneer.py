@@ -35,6 +35,7 @@ from rhal import arcos
 from rhal.base import Robot
 from rhal.errors import RobotConnectionError
 from rhal.kinematics import compass_heading
+from rhal.linked import LinkKeeper, StreamLink
 
 DEFAULT_DEVICE = "/dev/ttyUSB0"
 DEFAULT_HOST, DEFAULT_TCP_PORT = "127.0.0.1", 8101
@@ -44,7 +45,6 @@ VELOCITY_REFRESH = 0.5  # s: while moving, re-send the speeds this often, so one
 # on a noisy line cannot leave the robot on an old speed
 KEEPALIVE_TICK = 0.1  # s
 SYNC_WAIT = 0.5  # s to wait for each handshake reply before starting over
-BACKOFF_FIRST, BACKOFF_MAX = 0.2, 5.0  # s between reconnection attempts, doubling
 
 
 class PioneerRobot(Robot):
@@ -84,9 +84,14 @@ class PioneerRobot(Robot):
         self.identity: dict[str, str] = {}
         self._parser = arcos.PacketParser()
         self._bad_sips = 0
-        self._link: _Link | None = None
-        self._lost = "not connected yet"  # why self._link is None
-        self._task: asyncio.Task[None] | None = None
+        self._keeper: LinkKeeper[_Link] = LinkKeeper(
+            f"the pioneer robot at {url!r}",
+            connect=self._connect,
+            serve=self._serve,
+            halt=self._halt,
+            drop=_Link.close,
+            on_lost=self._forget_command,
+        )
         self._command = (0, 0)  # mm/s, deg/s: what the robot was last told
         self._velocity_sent = self._pulse_sent = 0.0
         self._reset_readings()
@@ -98,7 +103,7 @@ class PioneerRobot(Robot):
 
     @property
     def connected(self) -> bool:
-        return self._link is not None
+        return self._keeper.connected
 
     @property
     def wire_device(self) -> str | None:
@@ -107,23 +112,10 @@ class PioneerRobot(Robot):
     # -- hooks -----------------------------------------------------------------------------
 
     async def _open(self) -> None:
-        self._link = await self._connect()
-        self._task = asyncio.create_task(self._maintain(), name=f"pioneer link {self.url}")
+        await self._keeper.open()
 
     async def _close(self) -> None:
-        task, self._task = self._task, None
-        if task is not None:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
-        link, self._link = self._link, None
-        self._lost = "closed"
-        if link is not None:
-            # Best effort, and bounded: a robot that stopped reading must not hang close().
-            with contextlib.suppress(OSError):  # TimeoutError is an OSError
-                async with asyncio.timeout(self.timeout):
-                    await link.send(arcos.encode(arcos.CLOSE))
-            await link.close()
+        await self._keeper.close(goodbye=_say_close)
 
     async def _drive(self, linear: float, angular: float) -> None:
         # Set before sending: the keep-alive re-sends self._command and must never re-send an
@@ -142,8 +134,8 @@ class PioneerRobot(Robot):
 
     async def _read_sensors(self) -> dict[str, Any]:
         sip = self._sip
-        if self._link is None or sip is None:
-            raise self._lost_error()
+        if sip is None or not self.connected:
+            raise self._keeper.lost_error()
         x, y, theta = self._pose
         if self.compass:
             heading = None if sip.compass is None else float(sip.compass)
@@ -191,7 +183,7 @@ class PioneerRobot(Robot):
             reader, writer = await serial_asyncio.open_serial_connection(
                 url=self.device, baudrate=self.baud
             )
-        link = _Link(reader, writer, self._parser, self.wire_taps)
+        link = _Link(reader, writer, self.timeout, self._parser, self.wire_taps)
         deadline = 3 * self.timeout
         try:
             async with asyncio.timeout(deadline):
@@ -226,17 +218,6 @@ class PioneerRobot(Robot):
                 self.identity = dict(zip(("name", "class", "subclass"), names, strict=True))
             step += 1
 
-    async def _maintain(self) -> None:
-        """Serve the link until it fails, then reconnect with backoff; until cancelled."""
-        link = self._link
-        while link is not None:
-            reason = await self._serve(link)
-            self._link, self._lost = None, reason
-            self._command = (0, 0)
-            await link.close()
-            link = await self._reconnect()
-            self._link = link
-
     async def _serve(self, link: _Link) -> str:
         """Read packets until the link fails; return why it did."""
         keepalive = asyncio.create_task(self._keep_alive(link))
@@ -252,15 +233,12 @@ class PioneerRobot(Robot):
             with contextlib.suppress(asyncio.CancelledError):
                 await keepalive
 
-    async def _reconnect(self) -> _Link:
-        delay = BACKOFF_FIRST
-        while True:
-            await asyncio.sleep(delay)
-            try:
-                return await self._connect()
-            except (OSError, RobotConnectionError) as exc:
-                self._lost = f"reconnecting failed: {exc}"
-                delay = min(2 * delay, BACKOFF_MAX)
+    async def _halt(self, link: _Link) -> None:
+        self._command = (0, 0)
+        await link.send(self._velocity_packets())
+
+    def _forget_command(self, reason: str) -> None:
+        self._command = (0, 0)
 
     async def _keep_alive(self, link: _Link) -> None:
         """PULSE for the robot's watchdog, which stops the motors after ~2 s of silence."""
@@ -282,9 +260,7 @@ class PioneerRobot(Robot):
                     return
 
     async def _send(self, packets: bytes) -> None:
-        link = self._link
-        if link is None:
-            raise self._lost_error()
+        link = self._keeper.require()
         try:
             await link.send(packets)
         except OSError as exc:
@@ -294,11 +270,6 @@ class PioneerRobot(Robot):
     def _velocity_packets(self) -> bytes:
         linear, angular = self._command
         return arcos.encode(arcos.VEL, linear) + arcos.encode(arcos.RVEL, angular)
-
-    def _lost_error(self) -> RobotConnectionError:
-        return RobotConnectionError(
-            f"no link to the pioneer robot at {self.url!r} ({self._lost}); reconnecting"
-        )
 
     # -- readings --------------------------------------------------------------------------
 
@@ -323,18 +294,19 @@ class PioneerRobot(Robot):
         self._sip = sip
 
 
-class _Link:
+class _Link(StreamLink):
     """One connection's streams, cut into packets."""
 
     def __init__(
         self,
         reader: asyncio.StreamReader,
         writer: asyncio.StreamWriter,
+        timeout: float,
         parser: arcos.PacketParser,
-        taps: list | None = None,
+        taps: list,
     ) -> None:
-        self._reader, self._writer, self._parser = reader, writer, parser
-        self._taps = taps if taps is not None else []
+        super().__init__(reader, writer, timeout)
+        self._parser, self._taps = parser, taps
         self._pending: deque[bytes] = deque()
         parser.reset()
 
@@ -342,27 +314,15 @@ class _Link:
         """The next valid packet body; TimeoutError, or OSError when the link is gone."""
         while not self._pending:
             async with asyncio.timeout(timeout):
-                data = await self._reader.read(4096)
-            if not data:
-                raise ConnectionResetError("the robot closed the link")
+                data = await self.read()
             for tap in self._taps:
                 tap(data)
             self._pending.extend(self._parser.feed(data))
         return self._pending.popleft()
 
-    async def send(self, data: bytes) -> None:
-        if self._writer.is_closing():
-            raise ConnectionResetError("the link is closed")
-        self._writer.write(data)
-        await self._writer.drain()
 
-    def abort(self) -> None:
-        self._writer.transport.abort()
-
-    async def close(self) -> None:
-        self._writer.close()
-        with contextlib.suppress(OSError):
-            await self._writer.wait_closed()
+async def _say_close(link: _Link) -> None:
+    await link.send(arcos.encode(arcos.CLOSE))
 
 
 async def _sync_reply(link: _Link, step: int) -> bytes | None:

@@ -136,9 +136,8 @@ class Cia402(Profile):
         targets = {side: self._target(side, speed) for side, speed in speeds.items()}
         await self.call(link.command, targets, CW_ENABLE)
 
-    async def stop(self) -> None:
+    async def _halt(self, link: Any) -> None:
         # Whatever state the drives are in: a stop is always sent, halt bit and zero target.
-        link = self.require_link()
         await self.call(link.command, {"left": 0, "right": 0}, CW_ENABLE | CW_HALT)
 
     def _target(self, side: str, speed: float) -> int:

@@ -168,9 +168,9 @@ class Dbc(Profile):
         self._command = (linear, angular)
         await self._send(link)
 
-    async def stop(self) -> None:
+    async def _halt(self, link: _DbcLink) -> None:
         self._command = (0.0, 0.0)
-        await self._send(self.require_link())
+        await self._send(link)
 
     async def _send(self, link: _DbcLink) -> None:
         await self.call(self._send_latest, link)

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 import can
 
 from rhal.errors import RobotConnectionError
+from rhal.linked import LinkKeeper
 
 if TYPE_CHECKING:
     from rhal.canbus.robot import CanRobot
@@ -20,11 +21,10 @@ if TYPE_CHECKING:
 PROFILE_DIR = Path(__file__).parent.parent / "can_profiles"
 TICK = 0.05  # s between checks of the link
 NOTIFIER_CYCLE = 0.05  # s a Notifier thread waits for a frame: bounds how long closing takes
-BACKOFF_FIRST, BACKOFF_MAX = 0.2, 5.0  # s between reconnection attempts, doubling
 
 
 class Profile:
-    """A link's life: connect, watch, drop, reconnect with backoff; one blocking call at a time."""
+    """A CAN link's steps for its LinkKeeper; one blocking library call at a time."""
 
     name = ""
     default_timeout = 1.0
@@ -38,11 +38,20 @@ class Profile:
             float, "timeout", self.default_timeout if timeout is None else timeout
         )
         self.errors = 0
-        self.link: Any = None
         self._pending: Any = None  # the link being brought up, so close() can abort it
-        self._lost = "not connected yet"  # why self.link is None
-        self._task: asyncio.Task[None] | None = None
+        self._keeper: LinkKeeper[Any] = LinkKeeper(
+            f"the CAN base at {self.url!r}",
+            connect=self._connect,
+            serve=self._watch,
+            halt=self._halt,
+            drop=self._drop,
+            on_lost=lambda reason: self._on_lost(),
+        )
         self._io = asyncio.Lock()
+
+    @property
+    def link(self) -> Any:
+        return self._keeper.link
 
     async def call(self, function: Callable[..., Any], *args: Any) -> Any:
         """Run a blocking library call in a worker thread, one at a time."""
@@ -58,31 +67,18 @@ class Profile:
     async def open(self) -> None:
         self._io = asyncio.Lock()  # in this event loop
         self._reset()
-        self.link = await self._connect()
-        self._task = asyncio.create_task(self._maintain(), name=f"CAN link {self.url}")
+        await self._keeper.open()
 
     async def close(self) -> None:
         if self._pending is not None:
             self._pending.aborted = True
-        task, self._task = self._task, None
-        if task is not None:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
-        link, self.link = self.link, None
-        self._lost = "closed"
-        if link is not None:
-            await self.call(link.goodbye)
+        await self._keeper.close(goodbye=self._goodbye)
 
     def require_link(self) -> Any:
-        if self.link is None:
-            raise self.lost_error()
-        return self.link
+        return self._keeper.require()
 
-    def lost_error(self) -> RobotConnectionError:
-        return RobotConnectionError(
-            f"no link to the CAN base at {self.url!r} ({self._lost}); reconnecting"
-        )
+    async def stop(self) -> None:
+        await self._halt(self.require_link())
 
     async def _connect(self) -> Any:
         link = self._new_link(asyncio.get_running_loop())
@@ -102,26 +98,11 @@ class Profile:
             self._pending = None
         return link
 
-    async def _maintain(self) -> None:
-        """Watch the link until it fails, then reconnect with backoff; until cancelled."""
-        link = self.link
-        while link is not None:
-            reason = await self._watch(link)
-            self.link, self._lost = None, reason
-            self._on_lost()
-            await self.call(link.drop)
-            link = await self._reconnect()
-            self.link = link
+    async def _goodbye(self, link: Any) -> None:
+        await self.call(link.goodbye)
 
-    async def _reconnect(self) -> Any:
-        delay = BACKOFF_FIRST
-        while True:
-            await asyncio.sleep(delay)
-            try:
-                return await self._connect()
-            except (OSError, RobotConnectionError) as exc:
-                self._lost = f"reconnecting failed: {exc}"
-                delay = min(2 * delay, BACKOFF_MAX)
+    async def _drop(self, link: Any) -> None:
+        await self.call(link.drop)
 
     async def _watch(self, link: Any) -> str:
         """Return why the link failed, once it does."""
@@ -155,7 +136,8 @@ class Profile:
     async def drive(self, linear: float, angular: float) -> None:
         raise NotImplementedError
 
-    async def stop(self) -> None:
+    async def _halt(self, link: Any) -> None:
+        """Stop the wheels through this link."""
         raise NotImplementedError
 
     def readings(self) -> dict[str, Any]:

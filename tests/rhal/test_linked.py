@@ -1,0 +1,46 @@
+"""What every linked driver owes its robot through rhal.linked: when the robot goes quiet but
+the link still takes bytes, the driver stops it on the wire before it lets the link go, and
+says why the link was lost. Each case runs against its protocol's emulator."""
+
+import pytest
+
+from rhal import RobotConnectionError
+from rhal.mavlink import MavlinkRobot
+from rhal.pioneer import PioneerRobot
+from tests.rhal.arcos_emulator import ArcosEmulator
+from tests.rhal.mavlink_emulator import MavlinkEmulator
+from tests.waiting import until
+
+QUIET = 3600.0  # s: an emulator told to send this seldom has gone quiet
+
+
+async def test_a_pioneer_gone_quiet_is_stopped_on_the_wire():
+    emulator = ArcosEmulator()
+    await emulator.start_pty()
+    try:
+        async with PioneerRobot(f"pioneer://{emulator.path}", timeout=0.5) as robot:
+            await robot.drive(0.3, 0.2)
+            await until(lambda: emulator.vel == 300)
+            emulator.sip_interval = QUIET  # its SIPs stop; it still listens
+            await until(lambda: not robot.connected, timeout=3.0)
+            assert (emulator.vel, emulator.rvel) == (0, 0)
+            with pytest.raises(RobotConnectionError, match="no data from the robot for 0.5 s"):
+                await robot.sensors()
+    finally:
+        await emulator.stop()
+
+
+async def test_a_vehicle_gone_quiet_is_sent_a_zero_setpoint():
+    emulator = MavlinkEmulator(heartbeat=0.2)
+    await emulator.start()
+    try:
+        async with MavlinkRobot(emulator.url, arm_timeout=2, timeout=0.6) as robot:
+            await robot.drive(0.5, 0.0)
+            await until(lambda: emulator.commanded() == (0.5, 0.0))
+            emulator.heartbeat_period = QUIET
+            await until(lambda: not robot.connected, timeout=3.0)
+            assert emulator.commanded() == (0.0, 0.0)
+            with pytest.raises(RobotConnectionError, match="no HEARTBEAT"):
+                await robot.sensors()
+    finally:
+        await emulator.stop()
