@@ -34,16 +34,16 @@ ARG_POSITIVE, ARG_NEGATIVE = 0x3B, 0x1B
 MAX_ARG = 0x7FFF
 
 SIP_TYPES = (0x32, 0x33)  # standard SIP: 0x32 while stopped, 0x33 while moving
-ANGLE_UNITS = 4096  # THPOS units per revolution
 NO_COMPASS = 255  # the COMPASS byte of a robot without one
 
 # Standard SIP, in order: type, XPOS, YPOS, THPOS, L VEL, R VEL, BATTERY (0.1 V), STALL AND
 # BUMPERS, CONTROL, FLAGS, COMPASS (2-degree units), SONAR_COUNT; then SONAR_COUNT readings.
 _SIP_HEAD = struct.Struct("<BHHhhhBHhHBB")
 _SONAR_READING = struct.Struct("<BH")  # sonar number, range in mm
-# After the sonar: GRIPSTATE, ANPORT, ANALOG, DIGIN, DIGOUT, BATTERYX10. Older firmware stops
-# earlier, so this part is optional.
+# After the sonar: GRIPSTATE, ANPORT, ANALOG, DIGIN, DIGOUT, BATTERYX10; then CHARGESTATE and
+# ROTVEL (0.1 deg/s). Older firmware stops earlier, so each part is optional.
 _SIP_TAIL = struct.Struct("<5BH")
+_SIP_ROTVEL = struct.Struct("<Bh")
 
 
 def checksum(body: bytes) -> int:
@@ -132,21 +132,26 @@ class PacketParser:
 
 @dataclass(frozen=True)
 class Sip:
-    """A standard server information packet, in the robot's own units."""
+    """A standard server information packet, in the robot's own units: what a unit is worth
+    depends on the model (rhal.pioneer_models), so nothing here is converted."""
 
     moving: bool
-    xpos: int  # mm, 15 bits that wrap: see Odometry
+    xpos: int  # position units (DistConvFactor mm each), 15 bits that wrap: see Odometry
     ypos: int
-    thpos: int  # ANGLE_UNITS per revolution, counter-clockwise
-    left: int  # wheel speeds, mm/s
+    thpos: int  # heading units (AngleConvFactor rad each), counter-clockwise
+    left: int  # wheel speeds, velocity units (VelConvFactor mm/s each)
     right: int
     battery: float  # V
     stall_left: bool
     stall_right: bool
-    bumpers: int  # front bumper bits 0-6, rear bumper bits 8-14
+    # The manual: bits 1-7 of STALL AND BUMPERS are the first bumper input, the rear ring;
+    # bits 9-15 the second, the front ring. Bumper i is bit i here.
+    front_bumpers: int
+    rear_bumpers: int
     motors: bool  # motors enabled
     compass: int | None  # degrees clockwise from north, None without a compass
-    sonar: dict[int, int] = field(default_factory=dict)  # sonar number -> mm, new readings
+    sonar: dict[int, int] = field(default_factory=dict)  # sonar number -> range units
+    rotvel: float | None = None  # deg/s, from firmware that sends ROTVEL
 
 
 def is_sip(body: bytes) -> bool:
@@ -168,10 +173,13 @@ def parse_sip(body: bytes) -> Sip:
             offset += _SONAR_READING.size
     except struct.error as exc:
         raise ValueError(f"SIP cut short: {exc}") from None
-    volts = battery / 10.0
+    volts, rotvel = battery / 10.0, None
     if len(body) >= offset + _SIP_TAIL.size:
         # BATTERYX10 also reads right above 25.5 V, where the one-byte field overflows.
         volts = _SIP_TAIL.unpack_from(body, offset)[-1] / 10.0 or volts
+        offset += _SIP_TAIL.size
+        if len(body) >= offset + _SIP_ROTVEL.size:
+            rotvel = _SIP_ROTVEL.unpack_from(body, offset)[1] / 10.0
     return Sip(
         moving=kind == 0x33,
         xpos=xpos & 0x7FFF,
@@ -182,24 +190,28 @@ def parse_sip(body: bytes) -> Sip:
         battery=volts,
         stall_left=bool(stall_bumpers & 0x0001),
         stall_right=bool(stall_bumpers & 0x0100),
-        bumpers=(stall_bumpers >> 1) & 0x7F7F,
+        front_bumpers=(stall_bumpers >> 9) & 0x7F,
+        rear_bumpers=(stall_bumpers >> 1) & 0x7F,
         motors=bool(flags & 0x0001),
         compass=None if compass > 180 else 2 * compass,
         sonar=sonar,
+        rotvel=rotvel,
     )
 
 
 class Odometry:
     """Turn successive SIP positions into a continuous pose in metres and radians.
 
-    XPOS and YPOS are 15-bit counters that wrap (MobileSim sends 16 bits that wrap, which is
-    the same modulo 2**15), so positions are followed by the change between packets: right
-    as long as the robot moves less than 16 m between two SIPs.
+    XPOS and YPOS are 15-bit counters that wrap (MobileSim and AMRISim send 16 bits that wrap,
+    the same modulo 2**15), so positions are followed by the change between packets: right as
+    long as the robot moves less than 2**14 units between two SIPs (7.6 m on a P3-AT).
+    ``mm_per_unit`` is the model's DistConvFactor; ``rad_per_unit`` its AngleConvFactor.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, mm_per_unit: float = 1.0, rad_per_unit: float = math.tau / 4096) -> None:
+        self.mm_per_unit, self.rad_per_unit = mm_per_unit, rad_per_unit
         self._raw: tuple[int, int] | None = None
-        self._x = self._y = 0  # mm
+        self._x = self._y = 0  # position units
 
     def update(self, sip: Sip) -> tuple[float, float, float]:
         if self._raw is None:
@@ -208,8 +220,9 @@ class Odometry:
             self._x += _wrap15(sip.xpos - self._raw[0])
             self._y += _wrap15(sip.ypos - self._raw[1])
         self._raw = (sip.xpos, sip.ypos)
-        theta = normalize_angle(sip.thpos * math.tau / ANGLE_UNITS)
-        return self._x / 1000.0, self._y / 1000.0, theta
+        metres = self.mm_per_unit / 1000.0
+        theta = normalize_angle(sip.thpos * self.rad_per_unit)
+        return self._x * metres, self._y * metres, theta
 
 
 def _wrap15(value: int) -> int:

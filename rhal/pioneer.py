@@ -6,9 +6,14 @@
 Options, also accepted in the URL query: ``baud`` (serial only, default 9600, the ARCOS
 default), ``timeout`` (s without a packet from the robot before the link counts as lost,
 default 2), ``pulse`` (s between keep-alives, default 1), ``compass`` (true if a compass is
-fitted: heading then comes from it instead of odometry), ``sonars`` (sonar discs, default 8),
-``track`` (m, the effective wheel track turning wheel speeds into a turn rate: 0.357 for a
-P3-DX, the default, and about 0.59 for a skid-steered P3-AT), ``max_linear``, ``max_angular``.
+fitted: heading then comes from it instead of odometry), ``max_linear``, ``max_angular``.
+
+Units differ by model: a classic P3-AT counts position in 0.465 mm units, a Pioneer 1 turns
+in 1024 heading units. The model the robot names in its SYNC2 reply picks its factors from
+ARIA's parameter files (rhal.pioneer_models); ``model`` names another, and ``dist_conv``,
+``angle_conv``, ``vel_conv``, ``range_conv``, ``track``, ``sonars``, ``front_bumpers`` and
+``rear_bumpers`` override one value each (rhal.pioneer_units). Speeds are also held under the
+model's top speeds. Commands are mm/s and deg/s on every model, as ARIA sends them.
 
 Serial goes through pyserial-asyncio's streams and TCP through asyncio's, so after connecting
 both are one StreamReader/StreamWriter pair and nothing blocks the event loop.
@@ -36,11 +41,12 @@ from rhal.base import Robot
 from rhal.errors import RobotConnectionError
 from rhal.kinematics import compass_heading
 from rhal.linked import LinkKeeper, StreamLink
+from rhal.pioneer_models import MODELS
+from rhal.pioneer_units import Units, fit
 
 DEFAULT_DEVICE = "/dev/ttyUSB0"
 DEFAULT_HOST, DEFAULT_TCP_PORT = "127.0.0.1", 8101
 SONAR_MAX = 5.0  # m, the Pioneer sonar's reach
-FRONT_SONARS = (3, 4)  # the discs at -10 and +10 degrees on the P3 front ring
 VELOCITY_REFRESH = 0.5  # s: while moving, re-send the speeds this often, so one packet lost
 # on a noisy line cannot leave the robot on an old speed
 KEEPALIVE_TICK = 0.1  # s
@@ -56,9 +62,17 @@ class PioneerRobot(Robot):
         "timeout": "s without a packet before the link counts as lost",
         "pulse": "s between keep-alive PULSEs for the robot's watchdog",
         "compass": "a compass is fitted: heading comes from it instead of odometry",
-        "sonars": "sonar discs on the robot (16 with the rear ring)",
-        "track": "m, effective wheel track: 0.357 for a P3-DX, about 0.59 for a P3-AT",
+        "model": "ARIA model whose units to use; blank: the one the robot names",
+        "dist_conv": "mm per position unit; blank: the model's DistConvFactor",
+        "angle_conv": "rad per heading unit; blank: the model's AngleConvFactor",
+        "vel_conv": "mm/s per wheel-speed unit; blank: the model's VelConvFactor",
+        "range_conv": "mm per sonar unit; blank: the model's RangeConvFactor",
+        "track": "m, effective wheel track; blank: 2 / the model's DiffConvFactor",
+        "sonars": "sonar discs reported; blank: the model's ring",
+        "front_bumpers": "front bump-ring segments; blank: the model's (0: none fitted)",
+        "rear_bumpers": "rear bump-ring segments; blank: the model's (0: none fitted)",
     }
+    option_choices = {"model": ("", *sorted(MODELS))}
 
     def __init__(
         self,
@@ -68,8 +82,15 @@ class PioneerRobot(Robot):
         timeout: float = 2.0,
         pulse: float = 1.0,
         compass: bool = False,
-        sonars: int = 8,
-        track: float = 0.357,
+        model: str | None = None,
+        dist_conv: float | None = None,
+        angle_conv: float | None = None,
+        vel_conv: float | None = None,
+        range_conv: float | None = None,
+        track: float | None = None,
+        sonars: int | None = None,
+        front_bumpers: int | None = None,
+        rear_bumpers: int | None = None,
         **limits: Any,
     ) -> None:
         super().__init__(url, **limits)
@@ -78,8 +99,29 @@ class PioneerRobot(Robot):
         self.timeout = _positive(float, "timeout", timeout)
         self.pulse = _positive(float, "pulse", pulse)
         self.compass = bool(compass)
-        self.sonars = _positive(int, "sonars", sonars)
-        self.track = _positive(float, "track", track)
+        self._unit_options = {
+            "model": model or None,
+            **{
+                name: None if value is None else _positive(float, name, value)
+                for name, value in (
+                    ("dist_conv", dist_conv),
+                    ("angle_conv", angle_conv),
+                    ("vel_conv", vel_conv),
+                    ("range_conv", range_conv),
+                    ("track", track),
+                )
+            },
+            **{
+                name: None if value is None else _count(name, value)
+                for name, value in (
+                    ("sonars", sonars),
+                    ("front_bumpers", front_bumpers),
+                    ("rear_bumpers", rear_bumpers),
+                )
+            },
+        }
+        #: what this robot's units are worth: its model's, once it has named it
+        self.units: Units = fit(None, self._unit_options)
         #: name, class and subclass the robot gave in its SYNC2 reply
         self.identity: dict[str, str] = {}
         self._parser = arcos.PacketParser()
@@ -101,6 +143,14 @@ class PioneerRobot(Robot):
         """Packets dropped so far: noise, bad checksums, truncated packets, short SIPs."""
         return self._parser.errors + self._bad_sips
 
+    def capabilities(self) -> dict[str, Any]:
+        found = super().capabilities()
+        model = self.units.describe()
+        drive = found["drive"]
+        drive["max_linear"] = min(drive["max_linear"], model["max_velocity"])
+        drive["max_angular"] = min(drive["max_angular"], model["max_rvelocity"])
+        return {**found, "model": model}
+
     @property
     def connected(self) -> bool:
         return self._keeper.connected
@@ -118,9 +168,12 @@ class PioneerRobot(Robot):
         await self._keeper.close(goodbye=_say_close)
 
     async def _drive(self, linear: float, angular: float) -> None:
+        top = self.units.model
+        linear = _clamp(linear * 1000.0, top.max_velocity)
+        angular = _clamp(math.degrees(angular), top.max_rvelocity)
         # Set before sending: the keep-alive re-sends self._command and must never re-send an
         # older speed after this one.
-        self._command = (round(linear * 1000.0), round(math.degrees(angular)))
+        self._command = (round(linear), round(angular))
         self._velocity_sent = time.monotonic()
         await self._send(self._velocity_packets())
 
@@ -136,22 +189,32 @@ class PioneerRobot(Robot):
         sip = self._sip
         if sip is None or not self.connected:
             raise self._keeper.lost_error()
+        units = self.units
         x, y, theta = self._pose
         if self.compass:
             heading = None if sip.compass is None else float(sip.compass)
         else:
             heading = compass_heading(theta)
-        front = [self._sonar[i] for i in FRONT_SONARS if i < self.sonars]
+        front = [self._sonar[i] for i in units.front_sonars]
         front = [reading for reading in front if reading is not None]
-        left, right = sip.left / 1000.0, sip.right / 1000.0
+        left, right = (wheel * units.mm_s_per_unit / 1000.0 for wheel in (sip.left, sip.right))
+        if sip.rotvel is not None:  # the firmware's own turn rate
+            turning = math.radians(sip.rotvel)
+        else:
+            turning = (right - left) / units.track
+        bumpers = {
+            "front": _bits(sip.front_bumpers, units.front_bumpers),
+            "rear": _bits(sip.rear_bumpers, units.rear_bumpers),
+        }
         return {
             "position": {"x": x, "y": y, "theta": theta},
-            "velocity": {"linear": (left + right) / 2.0, "angular": (right - left) / self.track},
+            "velocity": {"linear": (left + right) / 2.0, "angular": turning},
             "wheels": {"left": left, "right": right},
             "heading": heading,
             "range": min(front) if front else None,
             "sonar": list(self._sonar),
-            "bumper": sip.bumpers != 0,
+            "bumper": any(bumpers["front"]) or any(bumpers["rear"]),
+            "bumpers": bumpers,
             "stall": sip.stall_left or sip.stall_right,
             "battery": sip.battery,
             "motors": sip.motors,
@@ -164,9 +227,23 @@ class PioneerRobot(Robot):
             "velocity": {"unit": {"linear": "m/s", "angular": "rad/s"}, "source": "wheels"},
             "wheels": {"unit": {"left": "m/s", "right": "m/s"}},
             "heading": {"unit": "deg", "source": "compass" if self.compass else "odometry"},
-            "range": {"unit": "m", "max": SONAR_MAX, "sonars": list(FRONT_SONARS)},
-            "sonar": {"unit": "m", "max": SONAR_MAX, "count": self.sonars},
+            "range": {"unit": "m", "max": SONAR_MAX, "sonars": list(self.units.front_sonars)},
+            "sonar": {
+                "unit": "m",
+                "max": SONAR_MAX,
+                "count": len(self.units.sonars),
+                # where each disc sits: m forward and left of the centre, degrees to the left
+                "discs": [
+                    {"x": disc.x / 1000.0, "y": disc.y / 1000.0, "heading": disc.heading}
+                    for disc in self.units.sonars
+                ],
+            },
             "bumper": {"unit": "bool"},
+            "bumpers": {
+                "unit": {"front": "bool", "rear": "bool"},
+                "front": self.units.front_bumpers,
+                "rear": self.units.rear_bumpers,
+            },
             "stall": {"unit": "bool"},
             "battery": {"unit": "V"},
             "motors": {"unit": "bool"},
@@ -216,6 +293,7 @@ class PioneerRobot(Robot):
                 parts = reply[1:].split(b"\0") + [b"", b"", b""]
                 names = [part.decode("latin-1") for part in parts[:3]]
                 self.identity = dict(zip(("name", "class", "subclass"), names, strict=True))
+                self.units = fit(self.identity["subclass"], self._unit_options)
             step += 1
 
     async def _serve(self, link: _Link) -> str:
@@ -275,9 +353,9 @@ class PioneerRobot(Robot):
 
     def _reset_readings(self) -> None:
         self._sip: arcos.Sip | None = None
-        self._odometry = arcos.Odometry()
+        self._odometry = arcos.Odometry(self.units.mm_per_unit, self.units.rad_per_unit)
         self._pose = (0.0, 0.0, 0.0)
-        self._sonar: list[float | None] = [None] * self.sonars
+        self._sonar: list[float | None] = [None] * len(self.units.sonars)
 
     def _take(self, body: bytes) -> None:
         if not arcos.is_sip(body):
@@ -288,9 +366,10 @@ class PioneerRobot(Robot):
             self._bad_sips += 1
             return
         self._pose = self._odometry.update(sip)
-        for number, millimetres in sip.sonar.items():
-            if number < self.sonars:
-                self._sonar[number] = millimetres / 1000.0
+        metres = self.units.mm_per_range_unit / 1000.0
+        for number, reading in sip.sonar.items():
+            if number < len(self._sonar):  # ARIA too drops discs its model does not have
+                self._sonar[number] = reading * metres
         self._sip = sip
 
 
@@ -351,6 +430,20 @@ def _parse_url(url: str) -> tuple[str | None, tuple[str, int] | None]:
         # pioneer://COM3 names a Windows port in the host part.
         return (parts.netloc + parts.path) or DEFAULT_DEVICE, None
     raise ValueError(f"not a pioneer URL: {url!r}; use pioneer:///dev/... or pioneer+tcp://")
+
+
+def _clamp(value: float, limit: float) -> float:
+    return max(-limit, min(limit, value))
+
+
+def _bits(value: int, count: int) -> list[bool]:
+    return [bool(value >> i & 1) for i in range(count)]
+
+
+def _count(name: str, value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ValueError(f"{name} must be a whole number, 0 or more, got {value!r}")
+    return value
 
 
 def _positive(kind: type, name: str, value: Any) -> Any:

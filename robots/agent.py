@@ -357,6 +357,7 @@ class RobotAgent:
             camera = capabilities.get("camera") is not None
             state = {"sensors": await self.readings(), "units": self.units, "camera": camera}
             state["drive"] = capabilities["drive"]
+            state["model"] = capabilities.get("model")  # a driver's robot model, if it has one
             state["lease"] = self.lease.holder.as_dict() if self.lease.holder else None
             await self.reply(message, {**state, "shows": self.shows})
         elif kind == "robot.teleop":

@@ -53,6 +53,7 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
         context["camera"] = has_camera(robot, state)
         context["holder"] = state["lease"]
         context["drive"] = state["drive"]
+        context["model"] = state.get("model")
         context["shows"] = show_items(state["shows"])
     # The gateway card once, server-side; it then reloads itself (robots/_gateway.html).
     context["gateway"] = gateway_views.gateway_context(robot, away="agent_error" in context)

@@ -100,7 +100,7 @@ def test_url_names_the_link(url, device, address):
 def test_url_options_reach_the_driver(monkeypatch):
     monkeypatch.setitem(rhal.DRIVERS, "pioneer", ("rhal.pioneer", "PioneerRobot"))
     bot = rhal.connect("pioneer:///dev/ttyS0?baud=115200&compass=true&sonars=16&timeout=0.5")
-    assert (bot.baud, bot.compass, bot.sonars, bot.timeout) == (115200, True, 16, 0.5)
+    assert (bot.baud, bot.compass, len(bot.units.sonars), bot.timeout) == (115200, True, 16, 0.5)
     assert bot.capabilities()["sensors"]["sonar"]["count"] == 16
     with pytest.raises(ValueError, match="baud"):
         PioneerRobot("pioneer://", baud=0)
