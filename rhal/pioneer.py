@@ -203,26 +203,35 @@ class PioneerRobot(Robot):
         else:
             turning = (right - left) / units.track
         bumpers = {
-            "front": _bits(sip.front_bumpers, units.front_bumpers),
-            "rear": _bits(sip.rear_bumpers, units.rear_bumpers),
+            ring: _bits(bits, count)
+            for ring, bits, count in (
+                ("front", sip.front_bumpers, units.front_bumpers),
+                ("rear", sip.rear_bumpers, units.rear_bumpers),
+            )
+            if count
         }
-        return {
+        readings = {
             "position": {"x": x, "y": y, "theta": theta},
             "velocity": {"linear": (left + right) / 2.0, "angular": turning},
             "wheels": {"left": left, "right": right},
             "heading": heading,
             "range": min(front) if front else None,
             "sonar": list(self._sonar),
-            "bumper": any(bumpers["front"]) or any(bumpers["rear"]),
+            "bumper": any(any(ring) for ring in bumpers.values()),
             "bumpers": bumpers,
             "stall": sip.stall_left or sip.stall_right,
             "battery": sip.battery,
             "motors": sip.motors,
             "errors": self.errors,
         }
+        if not bumpers:
+            del readings["bumpers"]  # a model without bump rings
+        return readings
 
     def _sensor_specs(self) -> dict[str, dict[str, Any]]:
-        return {
+        rings = {"front": self.units.front_bumpers, "rear": self.units.rear_bumpers}
+        rings = {ring: count for ring, count in rings.items() if count}
+        specs = {
             "position": {"unit": {"x": "m", "y": "m", "theta": "rad"}, "source": "odometry"},
             "velocity": {"unit": {"linear": "m/s", "angular": "rad/s"}, "source": "wheels"},
             "wheels": {"unit": {"left": "m/s", "right": "m/s"}},
@@ -239,16 +248,17 @@ class PioneerRobot(Robot):
                 ],
             },
             "bumper": {"unit": "bool"},
-            "bumpers": {
-                "unit": {"front": "bool", "rear": "bool"},
-                "front": self.units.front_bumpers,
-                "rear": self.units.rear_bumpers,
-            },
+            # Each ring's segments in ARIA's order: the front ring from its left end, the rear
+            # ring from its right end.
+            "bumpers": {"unit": {ring: "bool" for ring in rings}, "segments": rings},
             "stall": {"unit": "bool"},
             "battery": {"unit": "V"},
             "motors": {"unit": "bool"},
             "errors": {"unit": "count"},
         }
+        if not rings:
+            del specs["bumpers"]
+        return specs
 
     # -- the link --------------------------------------------------------------------------
 

@@ -54,6 +54,7 @@ class Units:
                     "name": name,
                     "value": value,
                     "unit": unit,
+                    "shown": f"{value:.6g} {unit}",
                     "source": "settings" if name in self.overridden else "model",
                 }
                 for name, value, unit in (
