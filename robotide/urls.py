@@ -4,6 +4,7 @@ from django.urls import include, path
 from django.views.generic import RedirectView
 
 from programs import views as programs
+from programs import workbench
 from robotide import views_account as account
 from robotide import views_health
 from robotide.api import api
@@ -21,6 +22,9 @@ urlpatterns = [
     path("programs/import", programs.program_import, name="program-import"),
     path("programs/<int:program_id>/", programs.program_edit, name="program-edit"),
     path("programs/<int:program_id>/run", programs.program_run, name="program-run"),
+    path("programs/<int:program_id>/save", workbench.program_save, name="program-save"),
+    path("programs/<int:program_id>/start", workbench.program_start, name="program-start"),
+    path("programs/<int:program_id>/panel", workbench.program_panel, name="program-panel"),
     path("programs/<int:program_id>/download", programs.program_download, name="program-download"),
     path("programs/<int:program_id>/delete", programs.program_delete, name="program-delete"),
     path("programs/<int:program_id>/email", programs.program_email, name="program-email"),

@@ -41,23 +41,31 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
         "programs": programs_for_user(request.user),
         **queue_context(request.user, robot),
         **stop_context(request.user, robot),
+        **robot_state_context(robot),
     }
-    # The state now, so the page is whole before (or without) its websocket.
+    # The gateway card once, server-side; it then reloads itself (robots/_gateway.html).
+    context["gateway"] = gateway_views.gateway_context(robot, away="agent_error" in context)
+    return render(request, "robots/detail.html", context)
+
+
+def robot_state_context(robot) -> dict:
+    """The robot's state now, so a page is whole before (or without) its websocket."""
+    context = {"robot": robot}
     try:
         state = ask_agent_sync(robot.name, "robot.state", timeout=SNAPSHOT_TIMEOUT)
     except AgentUnavailable as exc:
         context["agent_error"] = str(exc)
-    else:
-        context["rows"] = sensor_rows(state["sensors"], state["units"])
-        context.update(status(state["sensors"], state["units"]))
-        context["camera"] = has_camera(robot, state)
-        context["holder"] = state["lease"]
-        context["drive"] = state["drive"]
-        context["model"] = state.get("model")
-        context["shows"] = show_items(state["shows"])
-    # The gateway card once, server-side; it then reloads itself (robots/_gateway.html).
-    context["gateway"] = gateway_views.gateway_context(robot, away="agent_error" in context)
-    return render(request, "robots/detail.html", context)
+        return context
+    return {
+        **context,
+        **status(state["sensors"], state["units"]),
+        "rows": sensor_rows(state["sensors"], state["units"]),
+        "camera": has_camera(robot, state),
+        "holder": state["lease"],
+        "drive": state["drive"],
+        "model": state.get("model"),
+        "shows": show_items(state["shows"]),
+    }
 
 
 def stop_context(user, robot) -> dict:
@@ -203,16 +211,25 @@ def robot_settings(request: HttpRequest, name: str) -> HttpResponse:
 @require_POST
 def robot_estop(request: HttpRequest, name: str) -> HttpResponse:
     robot = get_robot_for_user(request.user, name)
+    via = "the workbench" if request.POST.get("via") == "workbench" else "the robot's page"
     try:
-        record = stops.press(request.user, robot, "the robot's page")
+        record = stops.press(request.user, robot, via)
     except AgentUnavailable as exc:
-        messages.error(request, f"{exc} The press is recorded; the robot's own stop is not sure.")
-    else:
-        messages.warning(
-            request,
-            f"Emergency stop: {robot.name} stopped, {len(record.runs)} program(s) ended."
-            " Nothing moves it until it is resumed.",
+        level, text = (
+            messages.ERROR,
+            f"{exc} The press is recorded; the robot's own stop is not sure.",
         )
+    else:
+        level, text = (
+            messages.WARNING,
+            (
+                f"Emergency stop: {robot.name} stopped, {len(record.runs)} program(s) ended."
+                " Nothing moves it until it is resumed."
+            ),
+        )
+    if request.htmx:  # the workbench: it stays where it is and says so
+        return HttpResponse(text, status=503 if level == messages.ERROR else 200)
+    messages.add_message(request, level, text)
     return redirect("robot-detail", robot.name)
 
 

@@ -1,0 +1,108 @@
+"""The workbench's requests: save, save and run, and the robot panel beside the editor.
+
+The workbench page itself is the program page (views.program_edit); without scripts its form
+posts there as before. With scripts, its buttons and keys come here and stay on the page: a
+save answers JSON, a run answers the console (which then streams the run over its websocket),
+the panel answers the chosen robot's live view.
+
+A save names the revision the editor started from; if someone saved another since, nothing
+is overwritten: the answer is 409 with the difference, and the page asks what to do.
+"""
+
+from __future__ import annotations
+
+import difflib
+
+from django.contrib.auth.decorators import login_required
+from django.core.exceptions import PermissionDenied
+from django.http import HttpRequest, HttpResponse, JsonResponse
+from django.shortcuts import render
+from django.views.decorators.http import require_GET, require_POST
+
+from programs.access import EDIT, can, get_program_for_user
+from programs.forms import EditProgramForm
+from programs.models import Program
+from robots.models import get_robot_for_user
+from robots.runs import RunRefused, start_run
+from robots.views import robot_state_context
+
+
+class Conflict(Exception):
+    """Someone saved the program since this editor opened it."""
+
+    def __init__(self, program: Program, base: int, source: str) -> None:
+        latest = program.revisions.first()
+        self.latest = latest.number if latest else 0
+        self.diff = "".join(
+            difflib.unified_diff(
+                (latest.source if latest else "").splitlines(keepends=True),
+                source.splitlines(keepends=True),
+                f"revision {self.latest} (saved since you opened it)",
+                "your text",
+            )
+        )
+        super().__init__(f"revision {self.latest} was saved after revision {base}")
+
+
+@login_required
+@require_POST
+def program_save(request: HttpRequest, program_id: int) -> JsonResponse:
+    program = get_program_for_user(request.user, program_id)
+    try:
+        revision = _save(request, program)
+    except Conflict as conflict:
+        return _conflict(conflict)
+    except ValueError as exc:
+        return JsonResponse({"error": str(exc)}, status=400)
+    return JsonResponse({"revision": revision, "saved": True})
+
+
+@login_required
+@require_POST
+def program_start(request: HttpRequest, program_id: int) -> HttpResponse:
+    """Save (when the user may) and run; the answer is the console for the new run."""
+    program = get_program_for_user(request.user, program_id)
+    try:
+        revision = _save(request, program) if can(request.user, EDIT, program) else None
+        robot = get_robot_for_user(request.user, request.POST.get("robot", ""))
+        run = start_run(program, robot, request.user)
+    except Conflict as conflict:
+        return _conflict(conflict)
+    except (ValueError, RunRefused, PermissionDenied) as exc:
+        return JsonResponse({"error": str(exc)}, status=400)
+    response = render(request, "programs/_console.html", {"run": run})
+    if revision is not None:
+        response["X-Revision"] = str(revision)
+    return response
+
+
+@login_required
+@require_GET
+def program_panel(request: HttpRequest, program_id: int) -> HttpResponse:
+    """The chosen robot's live view for the side panel: camera, readings, what is shown."""
+    get_program_for_user(request.user, program_id)
+    robot = get_robot_for_user(request.user, request.GET.get("robot", ""))
+    return render(request, "programs/_panel.html", robot_state_context(robot))
+
+
+def _save(request: HttpRequest, program: Program) -> int:
+    """Save the posted text as a new revision; its number. ValueError for a bad form."""
+    if not can(request.user, EDIT, program):
+        raise PermissionDenied("This program is shared with you read-only: save a copy.")
+    form = EditProgramForm(request.POST)
+    if not form.is_valid():
+        raise ValueError("; ".join(e for errors in form.errors.values() for e in errors))
+    source = form.cleaned_data["source"]
+    base = request.POST.get("base_revision", "")
+    latest = program.revisions.first()
+    if base.isdigit() and latest is not None and latest.number != int(base):
+        if latest.source != source:
+            raise Conflict(program, int(base), source)
+    program.language = form.cleaned_data["language"]
+    return program.save_source(source, request.user).number
+
+
+def _conflict(conflict: Conflict) -> JsonResponse:
+    return JsonResponse(
+        {"conflict": True, "revision": conflict.latest, "diff": conflict.diff}, status=409
+    )

@@ -1,0 +1,239 @@
+// The workbench: save, run, watch and stop without leaving the program page.
+//
+// Without scripts the page is a plain form that posts to the program page (save) and goes to
+// the run's page (run). With scripts, the same buttons and keys stay here: a save is a
+// request answered in JSON; a run answers its console, which streams the run's output over
+// the run's websocket (htmx's ws extension); the robot panel beside the editor is the chosen
+// robot's live view. Nothing typed is lost to an expired sign-in or a conflicting save.
+(function () {
+  "use strict";
+
+  function cookie(name) {
+    var found = document.cookie.split("; ").find(function (c) { return c.startsWith(name + "="); });
+    return found ? decodeURIComponent(found.split("=")[1]) : "";
+  }
+
+  document.addEventListener("DOMContentLoaded", function () {
+    var form = document.getElementById("editor-form");
+    if (!form || !form.dataset.saveUrl) return;
+    var editor = window.robotideEditor;  // editor.js, loaded first
+    var textarea = document.getElementById("source");
+    var language = form.querySelector('select[name="language"]');
+    var robotChoice = document.getElementById("bench-robot-choice");
+    var base = form.querySelector('input[name="base_revision"]');
+    var stateNote = document.getElementById("save-state");
+    var consoleBox = document.getElementById("console");
+    var stopButton = document.getElementById("bench-stop");
+    var estopButton = document.getElementById("bench-estop");
+    var conflictBox = document.getElementById("conflict");
+    var canEdit = form.dataset.canEdit === "true";
+    var busy = false;
+
+    form.querySelector(".console").hidden = false;
+    document.getElementById("bench-panel").hidden = false;
+    stopButton.hidden = estopButton.hidden = false;
+
+    function text() { return editor ? editor.getValue() : textarea.value; }
+    function snapshot() { return (language ? language.value : "") + "\n" + text(); }
+    var saved = snapshot();
+    function dirty() { return canEdit && snapshot() !== saved; }
+    function say(message, kind) {
+      stateNote.textContent = message;
+      stateNote.dataset.kind = kind || "";
+    }
+    function showDirty() { if (dirty()) say("Unsaved changes", "dirty"); else if (stateNote.dataset.kind === "dirty") say("Saved", "saved"); }
+    if (editor) editor.on("change", showDirty); else textarea.addEventListener("input", showDirty);
+    if (language) language.addEventListener("change", showDirty);
+
+    function post(url, action) {
+      if (editor) editor.save();
+      var data = new FormData(form);
+      data.set("action", action);
+      // The header's token, read now: the form's may be stale after signing in again.
+      data.delete("csrfmiddlewaretoken");
+      return fetch(url, {
+        method: "POST", body: data, credentials: "same-origin", redirect: "manual",
+        headers: { "X-CSRFToken": cookie("csrftoken"), "X-Requested-With": "fetch" },
+      });
+    }
+
+    // What every answer may say instead of its own: signed out, a conflict, an error.
+    function trouble(response) {
+      if (response.type === "opaqueredirect" || response.status === 401) {
+        signedOut();
+        return Promise.resolve(true);
+      }
+      if (response.status === 409) return response.json().then(function (answer) { showConflict(answer); return true; });
+      if (!response.ok) {
+        return response.json().then(function (answer) { say(answer.error || "Failed", "error"); return true; },
+          function () { say("The server answered " + response.status, "error"); return true; });
+      }
+      return Promise.resolve(false);
+    }
+
+    function saveAnswered(revision) {
+      saved = snapshot();
+      if (revision) {
+        base.value = revision;
+        var note = document.getElementById("revision-note");
+        if (note) note.textContent = "revision " + revision + ", just now";
+      }
+      conflictBox.hidden = true;
+      say(revision ? "Saved (revision " + revision + ")" : "Saved", "saved");
+    }
+
+    function save() {
+      if (!canEdit || busy) return Promise.resolve(false);
+      busy = true;
+      say("Saving…", "busy");
+      return post(form.dataset.saveUrl, "save").then(function (response) {
+        return trouble(response).then(function (failed) {
+          if (failed) return false;
+          return response.json().then(function (answer) { saveAnswered(answer.revision); return true; });
+        });
+      }, offline).finally(function () { busy = false; });
+    }
+
+    function run() {
+      if (busy) return;
+      busy = true;
+      say(canEdit ? "Saving and starting…" : "Starting…", "busy");
+      post(form.dataset.startUrl, "run").then(function (response) {
+        return trouble(response).then(function (failed) {
+          if (failed) return;
+          if (canEdit) saveAnswered(response.headers.get("X-Revision"));
+          else say("Started", "saved");
+          return response.text().then(showRun);
+        });
+      }, offline).finally(function () { busy = false; });
+    }
+
+    function offline() { say("Not sent: the server cannot be reached. Your text is still here.", "error"); return false; }
+
+    function signedOut() {
+      say("", "error");
+      stateNote.innerHTML = 'Your sign-in has expired; your text is kept here. <a href="/accounts/login/?next=/" target="_blank" rel="noopener">Sign in again</a> (a new tab), then come back: it is saved then.';
+      window.addEventListener("focus", function retry() {
+        window.removeEventListener("focus", retry);
+        save();
+      });
+    }
+
+    function showConflict(answer) {
+      say("Not saved: someone saved revision " + answer.revision + " since you opened it", "error");
+      conflictBox.hidden = false;
+      conflictBox.textContent = "";
+      var note = document.createElement("p");
+      note.textContent = "Revision " + answer.revision + " was saved after you opened this program. Nothing was overwritten. What differs from it:";
+      var diff = document.createElement("pre");
+      diff.className = "diff";
+      diff.textContent = answer.diff;
+      var keep = document.createElement("button");
+      keep.type = "button";
+      keep.textContent = "Save mine over it";
+      keep.addEventListener("click", function () { base.value = answer.revision; save(); });
+      conflictBox.append(note, diff, keep);
+    }
+
+    // -- the console ----------------------------------------------------------------------
+
+    var current = null;  // the console's run element
+    function showRun(html) {
+      consoleBox.innerHTML = html;
+      current = consoleBox.querySelector("[data-run]");
+      if (window.htmx) window.htmx.process(consoleBox);
+      stopButton.disabled = false;
+    }
+    function runOngoing() {
+      var status = current && current.querySelector("#run-status");
+      return status && ["queued", "starting", "running"].indexOf(status.dataset.state) >= 0;
+    }
+    // Follow the output, and know when the run ends.
+    new MutationObserver(function () {
+      var log = consoleBox.querySelector(".console-log");
+      if (log) log.scrollTop = log.scrollHeight;
+      stopButton.disabled = !runOngoing();
+    }).observe(consoleBox, { childList: true, subtree: true, attributes: true, attributeFilter: ["data-state"] });
+
+    function stop() {
+      if (!current || !runOngoing()) return;
+      say("Stopping…", "busy");
+      fetch(current.dataset.stopUrl, {
+        method: "POST", credentials: "same-origin", redirect: "manual",
+        headers: { "X-CSRFToken": cookie("csrftoken"), "HX-Request": "true" },
+      }).then(function (response) { trouble(response).then(function (failed) { if (!failed) say("Stopped", "saved"); }); }, offline);
+    }
+
+    function estop() {
+      var data = new FormData();
+      data.set("via", "workbench");
+      fetch("/robots/" + encodeURIComponent(robotChoice.value) + "/estop", {
+        method: "POST", body: data, credentials: "same-origin", redirect: "manual",
+        headers: { "X-CSRFToken": cookie("csrftoken"), "HX-Request": "true" },
+      }).then(function (response) {
+        if (response.type === "opaqueredirect") { signedOut(); return; }
+        response.text().then(function (text) { say(text || "Emergency stop: " + response.status, "error"); });
+      }, offline);
+    }
+
+    stopButton.addEventListener("click", stop);
+    estopButton.addEventListener("click", estop);
+    form.addEventListener("submit", function (event) {
+      var action = event.submitter && event.submitter.value;
+      if (action === "save") { event.preventDefault(); save(); }
+      else if (action === "run") { event.preventDefault(); run(); }
+      else saved = snapshot();  // save as: a page change the user asked for
+    });
+
+    // -- keys -----------------------------------------------------------------------------
+
+    var lastEscape = 0;
+    document.addEventListener("keydown", function (event) {
+      var mod = event.ctrlKey || event.metaKey;
+      if (mod && (event.key === "s" || event.key === "S")) { event.preventDefault(); save(); }
+      else if (mod && event.key === "Enter") { event.preventDefault(); run(); }
+      else if (event.key === "Escape") {
+        if (event.timeStamp - lastEscape < 800) { stop(); lastEscape = 0; }
+        else lastEscape = event.timeStamp;
+      }
+    });
+    if (editor) {
+      editor.setOption("extraKeys", Object.assign({}, editor.getOption("extraKeys"), {
+        "Ctrl-S": save, "Cmd-S": save, "Ctrl-Enter": run, "Cmd-Enter": run,
+        // Esc then Tab leaves the editor, so the keyboard is never trapped in it.
+        Esc: function (cm) { cm.state.leaving = true; setTimeout(function () { cm.state.leaving = false; }, 1500); },
+        Tab: function (cm) {
+          if (cm.state.leaving) { cm.state.leaving = false; cm.getInputField().blur(); robotChoice.focus(); return; }
+          cm.execCommand(cm.somethingSelected() ? "indentMore" : "insertSoftTab");
+        },
+      }));
+    }
+
+    window.addEventListener("beforeunload", function (event) {
+      if (dirty()) { event.preventDefault(); event.returnValue = ""; }
+    });
+
+    // -- the robot panel ------------------------------------------------------------------
+
+    var panelBody = document.getElementById("bench-panel-body");
+    var toggle = document.getElementById("panel-toggle");
+    function loadPanel() {
+      if (toggle.getAttribute("aria-expanded") !== "true" || !robotChoice.value) { panelBody.textContent = ""; return; }
+      fetch(form.dataset.panelUrl + "?robot=" + encodeURIComponent(robotChoice.value), { credentials: "same-origin" })
+        .then(function (response) { return response.ok ? response.text() : ""; })
+        .then(function (html) {
+          panelBody.innerHTML = html;
+          if (window.htmx) window.htmx.process(panelBody);
+        });
+    }
+    toggle.addEventListener("click", function () {
+      var open = toggle.getAttribute("aria-expanded") !== "true";
+      toggle.setAttribute("aria-expanded", String(open));
+      toggle.textContent = open ? "Hide the robot" : "Show the robot";
+      document.querySelector(".workbench").classList.toggle("panel-closed", !open);
+      loadPanel();
+    });
+    robotChoice.addEventListener("change", loadPanel);
+    loadPanel();
+  });
+})();

@@ -1,0 +1,148 @@
+"""The workbench in a real browser: write, run and watch on one page, stop by key, and never
+lose what was typed (unsaved-changes guard, an expired sign-in, a conflicting save)."""
+
+import re
+
+import pytest
+from playwright.sync_api import Page, expect
+
+from tests.browser.test_pages import (
+    FOREVER,
+    assert_not_reloaded,
+    editor_text,
+    mark_page,
+    set_editor_text,
+    sign_in,
+)
+
+COUNTDOWN = """\
+import robot
+
+bot = robot.Robot()
+bot.drive(0.2, 0.5)
+for i in (3, 2, 1):
+    print("countdown", i)
+bot.stop()
+"""
+
+
+@pytest.fixture
+def bench(new_page) -> Page:
+    """A browser signed in as admin."""
+    page = new_page()
+    sign_in(page)
+    return page
+
+
+def new_program(appliance, name: str, source: str) -> int:
+    response = appliance.api(
+        "POST", "/api/programs", {"name": name, "language": "python", "source": source}
+    )
+    assert response.status_code == 201, response.text
+    return response.json()["id"]
+
+
+def open_bench(page: Page, program_id: int) -> None:
+    page.goto(f"/programs/{program_id}/")
+    expect(page.locator(".CodeMirror")).to_be_visible()
+    expect(page.locator("#bench-panel #sensors")).to_be_visible()  # the robot, live
+
+
+def test_type_ctrl_enter_and_watch_the_output_and_the_robot(bench, appliance, screenshot):
+    page = bench
+    program = new_program(appliance, "Bench countdown", "print('first')\n")
+    open_bench(page, program)
+    mark_page(page)
+    set_editor_text(page, COUNTDOWN)
+    page.locator(".CodeMirror").click()  # and a line typed by hand, as a student would
+    page.keyboard.press("Control+End")
+    page.keyboard.type('print("typed")')
+    expect(page.locator("#save-state")).to_have_text("Unsaved changes")
+    page.keyboard.press("Control+Enter")
+    console = page.locator("#console")
+    expect(console.locator("#log-lines .ln.o")).to_have_text(
+        ["countdown 3", "countdown 2", "countdown 1", "typed"]
+    )
+    expect(console.locator("#run-status .state")).to_have_text("finished")
+    expect(console.locator("#run-status")).to_contain_text("exit code 0")
+    expect(page.locator("#save-state")).to_contain_text("Saved (revision 2)")
+    expect(page.locator("#bench-panel img.camera")).to_be_visible()  # the sim's view
+    assert_not_reloaded(page)
+    screenshot(page, "workbench-finished")
+    run_link = console.get_by_role("link", name=re.compile(r"Run #\d+"))
+    run_id = int(re.search(r"\d+", run_link.inner_text()).group())
+    assert appliance.api("GET", f"/api/runs/{run_id}").json()["state"] == "finished"
+
+
+def test_escape_twice_stops_the_run(bench, appliance, screenshot):
+    page = bench
+    program = new_program(appliance, "Bench forever", FOREVER)
+    open_bench(page, program)
+    page.get_by_role("button", name="Save and run").click()
+    console = page.locator("#console")
+    expect(console.locator("#log-lines .ln.o").nth(3)).to_be_visible()  # running
+    expect(page.locator("#bench-stop")).to_be_enabled()
+    screenshot(page, "workbench-running")
+    page.keyboard.press("Escape")
+    page.keyboard.press("Escape")
+    expect(console.locator("#run-status .state")).to_have_text("stopped")
+    expect(page.locator("#bench-stop")).to_be_disabled()
+
+
+def test_leaving_with_unsaved_changes_asks_first(bench, appliance):
+    page = bench
+    program = new_program(appliance, "Bench unsaved", "print(1)\n")
+    open_bench(page, program)
+    set_editor_text(page, "print(2)\n")
+    asked = []
+    page.on("dialog", lambda dialog: (asked.append(dialog.type), dialog.dismiss()))
+    page.close(run_before_unload=True)
+    page.wait_for_timeout(500)
+    assert asked == ["beforeunload"]
+
+
+def test_a_save_after_the_sign_in_expired_keeps_the_text(new_page, appliance):
+    program = new_program(appliance, "Bench expired", "print('old')\n")
+    page = new_page()
+    sign_in(page)
+    open_bench(page, program)
+    set_editor_text(page, "print('typed while signed out')\n")
+    page.context.clear_cookies(name="sessionid")  # the session expired meanwhile
+    page.keyboard.press("Control+s")
+    expect(page.locator("#save-state")).to_contain_text("sign-in has expired")
+    assert editor_text(page) == "print('typed while signed out')\n"
+    other = page.context.new_page()  # "Sign in again" opens a new tab
+    sign_in(other)
+    other.close()
+    page.bring_to_front()
+    page.evaluate("window.dispatchEvent(new Event('focus'))")
+    expect(page.locator("#save-state")).to_contain_text("Saved (revision 2)")
+    saved = appliance.api("GET", f"/api/programs/{program}").json()["source"]
+    assert saved == "print('typed while signed out')\n"
+
+
+def test_a_second_tab_is_told_of_the_conflict_and_shown_the_difference(
+    new_page, appliance, screenshot
+):
+    program = new_program(appliance, "Bench two tabs", "print('base')\n")
+    first, second = new_page(), new_page()
+    for tab in (first, second):
+        sign_in(tab)
+        open_bench(tab, program)
+    set_editor_text(first, "print('first tab')\n")
+    first.keyboard.press("Control+s")
+    expect(first.locator("#save-state")).to_contain_text("Saved (revision 2)")
+    set_editor_text(second, "print('second tab')\n")
+    second.keyboard.press("Control+s")
+    conflict = second.locator("#conflict")
+    expect(conflict).to_be_visible()
+    expect(conflict).to_contain_text("Revision 2 was saved after you opened")
+    expect(conflict.locator("pre.diff")).to_contain_text("-print('first tab')")
+    expect(conflict.locator("pre.diff")).to_contain_text("+print('second tab')")
+    assert appliance.api("GET", f"/api/programs/{program}").json()["source"] == (
+        "print('first tab')\n"
+    )
+    screenshot(second, "workbench-conflict")
+    conflict.get_by_role("button", name="Save mine over it").click()
+    expect(second.locator("#save-state")).to_contain_text("Saved (revision 3)")
+    expect(conflict).to_be_hidden()
