@@ -11,7 +11,7 @@ from django.template.loader import render_to_string
 from django.utils.html import escape
 
 from programs.access import get_run_for_user
-from programs.runlog import count_lines_between, lines_after, render_lines, tail
+from programs.runlog import count_lines_between, lines_after, places_in, render_lines, tail
 from programs.views import run_tables_context
 from robots.bus import RUNS_GROUP, run_group
 
@@ -62,6 +62,7 @@ class RunConsumer(AsyncWebsocketConsumer):
             self.run = get_run_for_user(self.scope["user"], run_id)
         except Http404:
             return None
+        self.place_of = places_in(self.run)
         return self.catch_up(page_offset)
 
     def catch_up(self, page_offset: int | None) -> str:
@@ -70,10 +71,11 @@ class RunConsumer(AsyncWebsocketConsumer):
             lines, end = lines_after(self.run.log_path, page_offset)
             if lines is not None:
                 self.offset = end
-                return f'<div id="log-lines" hx-swap-oob="beforeend">{render_lines(lines)}</div>'
+                html = render_lines(lines, self.place_of)
+                return f'<div id="log-lines" hx-swap-oob="beforeend">{html}</div>'
         lines, skipped, self.offset = tail(self.run.log_path)
         head = skipped_line(skipped) if skipped else ""
-        return f'<div id="log-lines">{head}{render_lines(lines)}</div>'
+        return f'<div id="log-lines">{head}{render_lines(lines, self.place_of)}</div>'
 
     async def disconnect(self, code):
         if self.group:
@@ -92,10 +94,8 @@ class RunConsumer(AsyncWebsocketConsumer):
                 count_lines_between, self.run.log_path, self.offset, fresh[0][0]
             )
         head = skipped_line(skipped) if skipped else ""
-        lines = [(tag, text) for _, tag, text in fresh]
-        await self.send(
-            f'<div id="log-lines" hx-swap-oob="beforeend">{head}{render_lines(lines)}</div>'
-        )
+        html = render_lines([(tag, text) for _, tag, text in fresh], self.place_of)
+        await self.send(f'<div id="log-lines" hx-swap-oob="beforeend">{head}{html}</div>')
 
     async def run_state(self, event):
         if self.group is None:

@@ -37,7 +37,7 @@ class Program(models.Model):
 
     @property
     def filename(self) -> str:
-        return (slugify(self.name) or "program") + self.lang.extension
+        return program_filename(self.name, self.language)
 
     def save_source(self, source: str, author) -> "Revision":
         """Save new text; every save keeps a revision, even an unchanged one is not duplicated."""
@@ -166,6 +166,11 @@ class Run(models.Model):
         return "" if self.reason == f"exit status {self.exit_code}" else self.reason
 
     @property
+    def program_file(self) -> str:
+        """The name its program ran under (the file its tracebacks name)."""
+        return program_filename(self.program_name, self.language)
+
+    @property
     def log_filename(self) -> str:
         return f"{slugify(self.program_name) or 'program'}-run{self.pk}.log"
 
@@ -183,7 +188,7 @@ class Run(models.Model):
 
     def start_message(self) -> dict:
         """What the agent needs to start it (as start_run hands it over), from the row."""
-        filename = (slugify(self.program_name) or "program") + get_language(self.language).extension
+        filename = self.program_file
         return {
             "run_id": self.pk,
             "language": self.language,
@@ -360,3 +365,16 @@ class Share(models.Model):
         if self.everyone:
             return "everyone"
         return f"group {self.group.name}" if self.group_id else f"user {self.user.username}"
+
+
+#: Names of the Robot API clients' modules: a program saved under one of them would be found
+#: by its own ``import robot`` (Python and Lua look beside the program first).
+CLIENT_MODULES = ("robot",)
+
+
+def program_filename(name: str, language: str) -> str:
+    """The file a program runs as: its name, made safe, never a client module's."""
+    stem = slugify(name) or "program"
+    if stem in CLIENT_MODULES:
+        stem += "-program"
+    return stem + get_language(language).extension

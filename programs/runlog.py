@@ -1,10 +1,12 @@
 """Reading a run's log file: tagged lines written by runbox.supervisor."""
 
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from django.utils.html import escape
+
+from programs.error_lines import error_place
 
 TAIL_LINES = 2000
 DOWNLOAD_CHUNK = 256 * 1024
@@ -84,6 +86,25 @@ def plain_text(path: Path, streams: str = "oes") -> Iterator[bytes]:
             yield b"".join(line[2:] for line in lines if line.startswith(wanted))
 
 
-def render_lines(lines) -> str:
-    """HTML for log lines: stdout, stderr and robotide's own lines told apart by class."""
-    return "".join(f'<div class="ln {tag}">{escape(text)}</div>' for tag, text in lines)
+def render_lines(lines, place_of: Callable[[str], int | None] | None = None) -> str:
+    """HTML for log lines: stdout, stderr and robotide's own lines told apart by class; an
+    error line that points into the program carries the line (``data-line``) for the editor."""
+    html = []
+    for tag, text in lines:
+        line = place_of(text) if place_of is not None and tag == "e" else None
+        mark = f' data-line="{line}"' if line else ""
+        html.append(f'<div class="ln {tag}"{mark}>{escape(text)}</div>')
+    return "".join(html)
+
+
+def places_in(run) -> Callable[[str], int | None]:
+    """What line of ``run``'s program an output line points at, if any."""
+
+    def place_of(text: str) -> int | None:
+        try:
+            found = error_place(run.language, text, run.program_file)
+        except (ValueError, LookupError):  # a language this robotide no longer has
+            return None
+        return found.line if found else None
+
+    return place_of

@@ -28,7 +28,7 @@ from programs.languages import (
     get_language,
 )
 from programs.models import Program, Run, Share
-from programs.runlog import plain_text, render_lines, tail
+from programs.runlog import places_in, plain_text, render_lines, tail
 from programs.shares import ShareError, add_share
 from robots import run_queue
 from robots.models import get_robot_for_user, robots_for_user
@@ -355,7 +355,8 @@ def run_tables_context(user, robot: str | None) -> dict:
 def run_detail(request: HttpRequest, run_id: int) -> HttpResponse:
     run = get_run_for_user(request.user, run_id)
     lines, skipped, offset = tail(run.log_path)
-    context = {"run": run, "log_html": render_lines(lines), "skipped": skipped, "offset": offset}
+    log_html = render_lines(lines, places_in(run))
+    context = {"run": run, "log_html": log_html, "skipped": skipped, "offset": offset}
     return render(request, "runs/detail.html", context)
 
 

@@ -146,3 +146,34 @@ def test_a_second_tab_is_told_of_the_conflict_and_shown_the_difference(
     conflict.get_by_role("button", name="Save mine over it").click()
     expect(second.locator("#save-state")).to_contain_text("Saved (revision 3)")
     expect(conflict).to_be_hidden()
+
+
+BROKEN = """\
+import robot
+
+def broken():
+    return 1 / 0
+
+broken()
+"""
+
+
+def test_a_python_error_links_to_its_line(bench, appliance, screenshot):
+    page = bench
+    program = new_program(appliance, "Bench broken", BROKEN)
+    open_bench(page, program)
+    page.keyboard.press("Control+Enter")
+    console = page.locator("#console")
+    expect(console.locator("#run-status .state")).to_have_text("failed")
+    # The traceback's frames in the program: the call on line 6, the division on line 4.
+    expect(console.locator(".ln.e[data-line]")).to_have_count(2)
+    assert console.locator(".ln.e[data-line]").evaluate_all(
+        "lines => lines.map(l => l.dataset.line)"
+    ) == ["6", "4"]
+    marked = page.locator(".CodeMirror .error-line")
+    expect(marked).to_have_count(1)
+    expect(marked).to_contain_text("return 1 / 0")  # the deepest frame is marked
+    screenshot(page, "workbench-error")
+    console.locator('.ln[data-line="6"]').click()
+    assert page.evaluate("window.robotideEditor.getCursor().line") == 5
+    expect(marked).to_contain_text("broken()")

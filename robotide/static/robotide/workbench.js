@@ -138,7 +138,37 @@
     // -- the console ----------------------------------------------------------------------
 
     var current = null;  // the console's run element
+    var marked = null;  // the editor line marked as the error's
+    function mark(line) {
+      if (!editor) return;
+      if (marked !== null) editor.removeLineClass(marked, "wrap", "error-line");
+      marked = line === null ? null : line - 1;
+      if (marked !== null) editor.addLineClass(marked, "wrap", "error-line");
+    }
+    function goToLine(line) {
+      mark(line);
+      if (editor) {
+        editor.setCursor({ line: line - 1, ch: 0 });
+        editor.scrollIntoView(null, 80);
+        editor.focus();
+      }
+    }
+    // An error line of the console points into the program (the server found the place):
+    // it becomes a link to that line, and the last one marks the line in the editor.
+    function linkErrorLines() {
+      var fresh = consoleBox.querySelectorAll(".ln[data-line]:not([role])");
+      fresh.forEach(function (element) {
+        var line = Number(element.dataset.line);
+        element.setAttribute("role", "link");
+        element.tabIndex = 0;
+        element.title = "Go to line " + line + " of the program";
+        element.addEventListener("click", function () { goToLine(line); });
+        element.addEventListener("keydown", function (event) { if (event.key === "Enter") goToLine(line); });
+      });
+      if (fresh.length) mark(Number(fresh[fresh.length - 1].dataset.line));
+    }
     function showRun(html) {
+      mark(null);
       consoleBox.innerHTML = html;
       current = consoleBox.querySelector("[data-run]");
       if (window.htmx) window.htmx.process(consoleBox);
@@ -152,6 +182,7 @@
     new MutationObserver(function () {
       var log = consoleBox.querySelector(".console-log");
       if (log) log.scrollTop = log.scrollHeight;
+      linkErrorLines();
       stopButton.disabled = !runOngoing();
     }).observe(consoleBox, { childList: true, subtree: true, attributes: true, attributeFilter: ["data-state"] });
 
