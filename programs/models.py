@@ -54,6 +54,28 @@ class Program(models.Model):
             )
 
 
+class Draft(models.Model):
+    """What a user typed and has not saved yet, kept by the editor every few seconds: one per
+    user and program, apart from the revisions, gone when they save or discard it."""
+
+    user = models.ForeignKey(settings.AUTH_USER_MODEL, on_delete=models.CASCADE)
+    program = models.ForeignKey(Program, on_delete=models.CASCADE, related_name="drafts")
+    source = models.TextField(blank=True)
+    language = models.CharField(max_length=20)
+    base_revision = models.PositiveIntegerField(default=0)  # what the editor started from
+    updated = models.DateTimeField(default=timezone.now)
+
+    class Meta:
+        constraints = [
+            models.UniqueConstraint(fields=["user", "program"], name="one_draft_per_user")
+        ]
+
+    def newer_than_saved(self) -> bool:
+        """Worth offering: it differs from the program as saved now."""
+        program = self.program
+        return self.source != program.source or self.language != program.language
+
+
 class Revision(models.Model):
     program = models.ForeignKey(Program, on_delete=models.CASCADE, related_name="revisions")
     number = models.PositiveIntegerField()

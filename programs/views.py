@@ -10,7 +10,7 @@ from django.shortcuts import get_object_or_404, redirect, render
 from django.utils.http import content_disposition_header, url_has_allowed_host_and_scheme
 from django.views.decorators.http import require_POST
 
-from programs import archive, outbound
+from programs import archive, outbound, workbench
 from programs.access import (
     EDIT,
     OWN,
@@ -114,6 +114,9 @@ def _render_editor(request, program, form, status=200):
         "is_owner": can(request.user, OWN, program),
         "shares": program.shares.select_related("user", "group"),
     }
+    if draft := workbench.draft_to_offer(request.user, program):
+        context["draft"] = draft
+        context["draft_data"] = {"source": draft.source, "language": draft.language}
     return render(request, "programs/edit.html", context, status=status)
 
 
@@ -160,6 +163,7 @@ def _save_and_act(request, program: Program, form: EditProgramForm) -> HttpRespo
         raise PermissionDenied("This program is shared with you read-only: save a copy.")
     program.language = data["language"]
     revision = program.save_source(data["source"], request.user)
+    workbench.forget_draft(request.user, program)
     if action == "run":
         return _start(request, program, request.POST.get("robot", ""))
     messages.success(request, f"Saved (revision {revision.number}).")

@@ -6,7 +6,9 @@ save answers JSON, a run answers the console (which then streams the run over it
 the panel answers the chosen robot's live view.
 
 A save names the revision the editor started from; if someone saved another since, nothing
-is overwritten: the answer is 409 with the difference, and the page asks what to do.
+is overwritten: the answer is 409 with the difference, and the page asks what to do. While
+the user types, the page keeps a draft here every few seconds (one per user and program);
+the page offers it back when it is newer than what was saved.
 """
 
 from __future__ import annotations
@@ -17,11 +19,12 @@ from django.contrib.auth.decorators import login_required
 from django.core.exceptions import PermissionDenied
 from django.http import HttpRequest, HttpResponse, JsonResponse
 from django.shortcuts import render
+from django.utils import timezone
 from django.views.decorators.http import require_GET, require_POST
 
 from programs.access import EDIT, can, get_program_for_user
 from programs.forms import EditProgramForm
-from programs.models import Program
+from programs.models import Draft, Program
 from robots.models import get_robot_for_user
 from robots.runs import RunRefused, start_run
 from robots.views import robot_state_context
@@ -85,13 +88,52 @@ def program_panel(request: HttpRequest, program_id: int) -> HttpResponse:
     return render(request, "programs/_panel.html", robot_state_context(robot))
 
 
+@login_required
+@require_POST
+def program_draft(request: HttpRequest, program_id: int) -> HttpResponse:
+    """Keep the editor's text as this user's draft, or (``discard``) forget it."""
+    program = get_program_for_user(request.user, program_id, EDIT)
+    if request.POST.get("discard"):
+        forget_draft(request.user, program)
+        return HttpResponse(status=204)
+    form = EditProgramForm(request.POST)
+    if not form.is_valid():
+        return JsonResponse({"error": "; ".join(_errors(form))}, status=400)
+    base = request.POST.get("base_revision", "")
+    Draft.objects.update_or_create(
+        user=request.user,
+        program=program,
+        defaults={
+            "source": form.cleaned_data["source"],
+            "language": form.cleaned_data["language"],
+            "base_revision": int(base) if base.isdigit() else 0,
+            "updated": timezone.now(),
+        },
+    )
+    return HttpResponse(status=204)
+
+
+def draft_to_offer(user, program: Program) -> Draft | None:
+    """The user's draft of the program, if it holds anything the saved program does not."""
+    draft = Draft.objects.filter(user=user, program=program).first()
+    return draft if draft is not None and draft.newer_than_saved() else None
+
+
+def forget_draft(user, program: Program) -> None:
+    Draft.objects.filter(user=user, program=program).delete()
+
+
+def _errors(form) -> list[str]:
+    return [error for errors in form.errors.values() for error in errors]
+
+
 def _save(request: HttpRequest, program: Program) -> int:
     """Save the posted text as a new revision; its number. ValueError for a bad form."""
     if not can(request.user, EDIT, program):
         raise PermissionDenied("This program is shared with you read-only: save a copy.")
     form = EditProgramForm(request.POST)
     if not form.is_valid():
-        raise ValueError("; ".join(e for errors in form.errors.values() for e in errors))
+        raise ValueError("; ".join(_errors(form)))
     source = form.cleaned_data["source"]
     base = request.POST.get("base_revision", "")
     latest = program.revisions.first()
@@ -99,7 +141,9 @@ def _save(request: HttpRequest, program: Program) -> int:
         if latest.source != source:
             raise Conflict(program, int(base), source)
     program.language = form.cleaned_data["language"]
-    return program.save_source(source, request.user).number
+    revision = program.save_source(source, request.user).number
+    forget_draft(request.user, program)
+    return revision
 
 
 def _conflict(conflict: Conflict) -> JsonResponse:

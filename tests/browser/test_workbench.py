@@ -177,3 +177,41 @@ def test_a_python_error_links_to_its_line(bench, appliance, screenshot):
     console.locator('.ln[data-line="6"]').click()
     assert page.evaluate("window.robotideEditor.getCursor().line") == 5
     expect(marked).to_contain_text("broken()")
+
+
+def test_a_closed_tab_leaves_a_draft_that_is_offered_back(new_page, appliance, screenshot):
+    program = new_program(appliance, "Bench draft", "print('saved')\n")
+    page = new_page()
+    sign_in(page)
+    open_bench(page, program)
+    set_editor_text(page, "print('typed, never saved')\n")
+    page.close()  # no time for anything but the page's goodbye
+    again = new_page()
+    sign_in(again)
+    open_bench(again, program)
+    offer = again.locator("#draft-offer")
+    expect(offer).to_contain_text("You have unsaved text from")
+    assert editor_text(again) == "print('saved')\n"  # nothing replaced without asking
+    screenshot(again, "workbench-draft")
+    offer.get_by_role("button", name="Restore it").click()
+    assert editor_text(again) == "print('typed, never saved')\n"
+    expect(again.locator("#save-state")).to_contain_text("not saved yet")
+    again.keyboard.press("Control+s")
+    expect(again.locator("#save-state")).to_contain_text("Saved (revision 2)")
+    again.reload()
+    expect(again.locator(".CodeMirror")).to_be_visible()
+    expect(again.locator("#draft-offer")).to_have_count(0)  # a save ends the draft
+
+
+def test_drafts_are_kept_while_typing(bench, appliance):
+    program = new_program(appliance, "Bench typing", "print('saved')\n")
+    open_bench(bench, program)
+    set_editor_text(bench, "print('typing')\n")
+    # The page keeps it within a few seconds, without a save and without leaving.
+    expect(bench.locator("#save-state")).to_have_text("Unsaved changes")
+    bench.wait_for_timeout(4000)
+    other = bench.context.new_page()
+    open_bench(other, program)
+    expect(other.locator("#draft-offer")).to_be_visible()
+    other.locator("#draft-offer").get_by_role("button", name="Discard it").click()
+    expect(other.locator("#draft-offer")).to_have_count(0)

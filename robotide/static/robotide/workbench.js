@@ -240,6 +240,61 @@
       }));
     }
 
+    // -- drafts: what is typed reaches the server every few seconds, apart from revisions --
+
+    var DRAFT_EVERY = 3000;  // ms after the last change
+    var drafted = saved, draftTimer = null;
+    function keepDraft() {
+      draftTimer = null;
+      if (!dirty() || snapshot() === drafted) return;
+      var text = snapshot();
+      post(form.dataset.draftUrl, "draft").then(function (response) {
+        if (response.status === 204) drafted = text;
+      }, function () { /* offline: the next change tries again */ });
+    }
+    function draftSoon() {
+      if (!canEdit) return;
+      if (draftTimer) clearTimeout(draftTimer);
+      draftTimer = setTimeout(keepDraft, DRAFT_EVERY);
+    }
+    if (editor) editor.on("change", draftSoon); else textarea.addEventListener("input", draftSoon);
+    if (language) language.addEventListener("change", draftSoon);
+
+    // A tab closed (or a browser quitting) sends what the timer had not sent yet.
+    window.addEventListener("pagehide", function () {
+      if (!dirty() || snapshot() === drafted || !navigator.sendBeacon) return;
+      if (editor) editor.save();
+      var data = new FormData(form);
+      data.set("action", "draft");
+      data.set("csrfmiddlewaretoken", cookie("csrftoken"));
+      navigator.sendBeacon(form.dataset.draftUrl, data);
+    });
+
+    var offer = document.getElementById("draft-offer");
+    if (offer) {
+      var draft = JSON.parse(document.getElementById("draft-data").textContent);
+      var restore = document.getElementById("draft-restore");
+      var discard = document.getElementById("draft-discard");
+      restore.hidden = discard.hidden = false;
+      restore.addEventListener("click", function () {
+        if (language) language.value = draft.language;
+        if (editor) editor.setValue(draft.source); else textarea.value = draft.source;
+        drafted = snapshot();
+        offer.remove();
+        showDirty();
+        say("Draft restored: not saved yet", "dirty");
+      });
+      discard.addEventListener("click", function () {
+        var data = new FormData();
+        data.set("discard", "1");
+        fetch(form.dataset.draftUrl, {
+          method: "POST", body: data, credentials: "same-origin",
+          headers: { "X-CSRFToken": cookie("csrftoken") },
+        });
+        offer.remove();
+      });
+    }
+
     window.addEventListener("beforeunload", function (event) {
       if (dirty()) { event.preventDefault(); event.returnValue = ""; }
     });
