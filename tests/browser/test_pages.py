@@ -143,13 +143,19 @@ def test_write_save_and_run_a_program(page, screenshot):
     screenshot(page, "editor")
 
     page.get_by_role("button", name="Save", exact=True).click()
-    expect(page.locator(".messages")).to_contain_text("Saved (revision 2)")
+    expect(page.locator("#save-state")).to_contain_text("Saved (revision 2)")
     page.reload()
     expect(page.locator(".CodeMirror")).to_be_visible()
     assert editor_text(page) == source
     assert page.locator("#source").input_value() == source
 
-    page.get_by_role("button", name="Save and run").click()
+    page.get_by_role("button", name="Save and run").click()  # the console, on this page
+    console = page.locator("#console")
+    expect(console.locator("#log-lines .ln.o")).to_have_text(
+        ["out line 0", "out line 1", "out line 2", "typed in the editor"]
+    )
+    expect(console.locator("#run-status .state")).to_have_text("finished")
+    console.get_by_role("link", name=re.compile(r"Run #\d+")).click()  # and its own page
     run_id = run_id_of(page)
     expect(page.get_by_role("heading", name=f"Run #{run_id}: Greeter")).to_be_visible()
     expect(page.locator("#log-lines .ln.o")).to_have_text(
@@ -240,7 +246,7 @@ def test_revisions_copy_download_and_delete(page, appliance, screenshot):
         expect(page.locator(".CodeMirror")).to_be_visible()
         set_editor_text(page, text)
         page.get_by_role("button", name="Save", exact=True).click()
-        expect(page.locator(".messages")).to_contain_text(f"Saved (revision {number})")
+        expect(page.locator("#save-state")).to_contain_text(f"Saved (revision {number})")
 
     page.get_by_role("link", name="Revisions").click()
     rows = page.locator("table.list tbody tr")
@@ -305,9 +311,8 @@ def test_upload_a_shell_script(page, tmp_path, screenshot):
     screenshot(page, "uploaded")
 
     page.get_by_role("button", name="Save and run").click()
-    run_id_of(page)
-    expect(page.locator("#log-lines .ln.o")).to_have_text(["waving from the shell"])
-    expect(page.locator("#run-status .state")).to_have_text("finished")
+    expect(page.locator("#console #log-lines .ln.o")).to_have_text(["waving from the shell"])
+    expect(page.locator("#console #run-status .state")).to_have_text("finished")
 
 
 def test_pages_work_with_scripts_off(new_page, appliance, screenshot):
