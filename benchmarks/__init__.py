@@ -16,6 +16,7 @@ BENCHMARKS = (
     "box_costs",
     "drivers",
     "robot_page",
+    "workbench",
     "camera",
     "gateway",
     "fleet",
