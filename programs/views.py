@@ -100,8 +100,9 @@ def program_edit(request: HttpRequest, program_id: int) -> HttpResponse:
     return _render_editor(request, program, form, status=400 if form.errors else 200)
 
 
-def _render_editor(request, program, form, status=200):
+def _render_editor(request, program, form, status=200, conflict=None):
     context = {
+        "conflict": conflict,
         "program": program,
         "form": form,
         "language": program.lang,
@@ -161,6 +162,15 @@ def _save_and_act(request, program: Program, form: EditProgramForm) -> HttpRespo
         if action == "run":  # a read-only program runs as it is
             return _start(request, program, request.POST.get("robot", ""))
         raise PermissionDenied("This program is shared with you read-only: save a copy.")
+    try:
+        workbench.check_base(program, request.POST.get("base_revision", ""), data["source"])
+    except workbench.Conflict as conflict:
+        form.add_error(
+            None,
+            f"Not saved: revision {conflict.latest} was saved after you opened this program, and"
+            " nothing was overwritten. What differs is below; Save again to save yours over it.",
+        )
+        return _render_editor(request, program, form, status=409, conflict=conflict)
     program.language = data["language"]
     revision = program.save_source(data["source"], request.user)
     workbench.forget_draft(request.user, program)

@@ -135,15 +135,20 @@ def _save(request: HttpRequest, program: Program) -> int:
     if not form.is_valid():
         raise ValueError("; ".join(_errors(form)))
     source = form.cleaned_data["source"]
-    base = request.POST.get("base_revision", "")
-    latest = program.revisions.first()
-    if base.isdigit() and latest is not None and latest.number != int(base):
-        if latest.source != source:
-            raise Conflict(program, int(base), source)
+    check_base(program, request.POST.get("base_revision", ""), source)
     program.language = form.cleaned_data["language"]
     revision = program.save_source(source, request.user).number
     forget_draft(request.user, program)
     return revision
+
+
+def check_base(program: Program, base: str, source: str) -> None:
+    """Conflict if another revision was saved since ``base`` (the one the editor opened) and
+    this text would overwrite it; no base (an old page, the API) is no conflict."""
+    latest = program.revisions.first()
+    if base.isdigit() and latest is not None and latest.number != int(base):
+        if latest.source != source:
+            raise Conflict(program, int(base), source)
 
 
 def _conflict(conflict: Conflict) -> JsonResponse:

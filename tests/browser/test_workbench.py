@@ -215,3 +215,19 @@ def test_drafts_are_kept_while_typing(bench, appliance):
     expect(other.locator("#draft-offer")).to_be_visible()
     other.locator("#draft-offer").get_by_role("button", name="Discard it").click()
     expect(other.locator("#draft-offer")).to_have_count(0)
+
+
+def test_without_scripts_a_conflicting_save_is_refused_with_the_difference(new_page, appliance):
+    program = new_program(appliance, "Bench plain", "print('base')\n")
+    page = new_page(java_script_enabled=False)
+    sign_in(page)
+    page.goto(f"/programs/{program}/")
+    response = appliance.api("PUT", f"/api/programs/{program}", {"source": "print('api')\n"})
+    assert response.status_code == 200, response.text  # someone saves meanwhile
+    page.locator("textarea#source").fill("print('mine')\n")
+    page.get_by_role("button", name="Save", exact=True).click()
+    expect(page.locator("#editor-form")).to_contain_text("Not saved: revision 2 was saved after")
+    expect(page.locator("#conflict pre.diff")).to_contain_text("+print('mine')")
+    expect(page.locator("textarea#source")).to_have_value("print('mine')\n")  # kept
+    page.get_by_role("button", name="Save", exact=True).click()
+    expect(page.locator(".messages")).to_contain_text("Saved (revision 3)")
