@@ -3,8 +3,8 @@ from django.contrib.auth import views as auth_views
 from django.urls import include, path
 from django.views.generic import RedirectView
 
+from programs import api_help, workbench
 from programs import views as programs
-from programs import workbench
 from robotide import views_account as account
 from robotide import views_health
 from robotide.api import api
@@ -43,6 +43,8 @@ urlpatterns = [
         name="program-unshare",
     ),
     path("languages/", programs.language_list, name="language-list"),
+    path("help/robot-api/", api_help.robot_api_page, name="robot-api-page"),
+    path("help/robot-api/<slug:language>.json", api_help.robot_api_help, name="robot-api-help"),
     path("pages/", include("django.contrib.flatpages.urls")),
     path("runs/", programs.run_list, name="run-list"),
     path("runs/<int:run_id>/", programs.run_detail, name="run-detail"),
