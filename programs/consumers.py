@@ -10,10 +10,10 @@ from django.http import Http404
 from django.template.loader import render_to_string
 from django.utils.html import escape
 
-from programs.access import get_run_for_user
+from programs.access import get_program_for_user, get_run_for_user
 from programs.runlog import count_lines_between, lines_after, places_in, render_lines, tail
 from programs.views import run_tables_context
-from robots.bus import RUNS_GROUP, run_group
+from robots.bus import RUNS_GROUP, console_group, run_group
 
 LIST_REFRESH_INTERVAL = 0.5
 log = logging.getLogger(__name__)
@@ -109,6 +109,51 @@ class RunConsumer(AsyncWebsocketConsumer):
     async def send_status(self):
         html = await database_sync_to_async(render_to_string)(
             "runs/_status.html", {"run": self.run, "oob": True}
+        )
+        await self.send(html)
+
+
+class ConsoleConsumer(RunConsumer):
+    """The workbench's console: open before Run is pressed, so a run's first lines need no
+    new connection. A run started from the workbench is attached to it (``console.attach``);
+    the console then shows that run as its page would, from its first line."""
+
+    async def connect(self):
+        program_id = self.scope["url_route"]["kwargs"]["program_id"]
+        if not await self.may_see(program_id):
+            await self.close(code=4404)
+            return
+        self.console = console_group(program_id, self.scope["user"].pk)
+        await self.channel_layer.group_add(self.console, self.channel_name)
+        await self.accept()
+
+    @database_sync_to_async
+    def may_see(self, program_id: int) -> bool:
+        try:
+            get_program_for_user(self.scope["user"], program_id)
+        except Http404:
+            return False
+        return True
+
+    async def disconnect(self, code):
+        if getattr(self, "console", None):
+            await self.channel_layer.group_discard(self.console, self.channel_name)
+        await super().disconnect(code)
+
+    async def console_attach(self, event):
+        """Follow this run from now on: join its group first, then read its log (as
+        RunConsumer.connect does, so no line falls between the two)."""
+        if self.group:
+            await self.channel_layer.group_discard(self.group, self.channel_name)
+        self.group = run_group(event["run_id"])
+        await self.channel_layer.group_add(self.group, self.channel_name)
+        lines = await self.see_run(event["run_id"], None)
+        if lines is None:
+            await self.channel_layer.group_discard(self.group, self.channel_name)
+            self.group = None
+            return
+        html = await database_sync_to_async(render_to_string)(
+            "programs/_console.html", {"run": self.run, "lines": lines, "attached": True}
         )
         await self.send(html)
 

@@ -20,7 +20,7 @@ from channels.routing import ProtocolTypeRouter, URLRouter  # noqa: E402
 from channels.security.websocket import AllowedHostsOriginValidator  # noqa: E402
 from django.urls import path, re_path  # noqa: E402
 
-from programs.consumers import RunConsumer, RunListConsumer  # noqa: E402
+from programs.consumers import ConsoleConsumer, RunConsumer, RunListConsumer  # noqa: E402
 from robotide.security import SameOriginWebsocket  # noqa: E402
 from robotide.served_by import ServedBy  # noqa: E402
 from robots.camera import CameraStream  # noqa: E402
@@ -29,6 +29,7 @@ from robots.consumers import RobotConsumer  # noqa: E402
 websocket_urlpatterns = [
     path("ws/runs/", RunListConsumer.as_asgi()),
     path("ws/runs/<int:run_id>/", RunConsumer.as_asgi()),
+    path("ws/programs/<int:program_id>/console/", ConsoleConsumer.as_asgi()),
     path("ws/robots/<slug:name>/", RobotConsumer.as_asgi()),
 ]
 

@@ -20,6 +20,11 @@ class AgentUnavailable(Exception):
     pass
 
 
+def console_group(program_id: int, user_id: int) -> str:
+    """A user's workbench consoles on one program (robotide's consumers.ConsoleConsumer)."""
+    return f"console.{program_id}.{user_id}"
+
+
 def run_group(run_id: int) -> str:
     return f"run-{run_id}"
 

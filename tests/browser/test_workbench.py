@@ -65,6 +65,8 @@ def test_type_ctrl_enter_and_watch_the_output_and_the_robot(bench, appliance, sc
     )
     expect(console.locator("#run-status .state")).to_have_text("finished")
     expect(console.locator("#run-status")).to_contain_text("exit code 0")
+    # It came over the console's websocket, open before Run: no connection of its own.
+    assert console.locator("#console-run").get_attribute("ws-connect") is None
     expect(page.locator("#save-state")).to_contain_text("Saved (revision 2)")
     expect(page.locator("#bench-panel img.camera")).to_be_visible()  # the sim's view
     assert_not_reloaded(page)

@@ -6,10 +6,10 @@ from channels.layers import get_channel_layer
 from channels.testing import WebsocketCommunicator
 from django.contrib.auth.models import AnonymousUser, Group, User
 
-from programs.consumers import RunConsumer, RunListConsumer
+from programs.consumers import ConsoleConsumer, RunConsumer, RunListConsumer
 from programs.models import Program, Run
 from robotide.models import ClassTeacher
-from robots.bus import RUNS_GROUP, run_group
+from robots.bus import RUNS_GROUP, console_group, run_group
 from robots.consumers import RobotConsumer
 from robots.models import Robot
 
@@ -163,4 +163,49 @@ async def test_the_run_list_keeps_what_staff_see_and_where_stop_returns():
     html = await comm.receive_from(timeout=3)
     assert "<th>User</th>" in html and f"#{run.pk}" in html
     assert 'name="next" value="/runs/?robot=sim"' in html
+    await comm.disconnect()
+
+
+# -- the workbench console -------------------------------------------------------------------
+
+
+async def test_the_console_follows_the_run_it_is_attached_to_from_its_first_line():
+    alice, _, run = await make_run(b"o first\ne oops\n")
+    path = f"/ws/programs/{run.program_id}/console/"
+    comm = communicator(ConsoleConsumer, path, alice, program_id=run.program_id)
+    assert (await comm.connect())[0]
+    layer = get_channel_layer()
+    attach = {"type": "console.attach", "run_id": run.pk}
+    await layer.group_send(console_group(run.program_id, alice.pk), attach)
+    console = await comm.receive_from()
+    assert f'<div id="console-run" data-run="{run.pk}"' in console
+    assert 'id="run-status"' in console
+    assert '<div class="ln o">first</div><div class="ln e">oops</div>' in console
+    lines = [[15, "o", "live"]]
+    await layer.group_send(
+        run_group(run.pk), {"type": "run.output", "run_id": run.pk, "lines": lines, "skipped": 0}
+    )
+    assert "live" in await comm.receive_from()
+    await comm.disconnect()
+
+
+async def test_a_console_is_refused_a_program_its_user_may_not_see():
+    alice, bob, run = await make_run(b"o secret\n")
+    path = f"/ws/programs/{run.program_id}/console/"
+    comm = communicator(ConsoleConsumer, path, bob, program_id=run.program_id)
+    assert not (await comm.connect())[0]
+
+
+async def test_a_console_shows_no_run_its_user_may_not_see():
+    # Attaching is by the user's own console group, but a run must still be theirs to see.
+    alice, bob, run = await make_run(b"o secret\n")
+    other = await database_sync_to_async(Program.objects.create)(
+        owner=bob, name="bobs", language="python"
+    )
+    path = f"/ws/programs/{other.pk}/console/"
+    comm = communicator(ConsoleConsumer, path, bob, program_id=other.pk)
+    assert (await comm.connect())[0]
+    attach = {"type": "console.attach", "run_id": run.pk}
+    await get_channel_layer().group_send(console_group(other.pk, bob.pk), attach)
+    assert await comm.receive_nothing(timeout=0.3)
     await comm.disconnect()

@@ -103,7 +103,8 @@
           if (failed) return;
           if (canEdit) saveAnswered(response.headers.get("X-Revision"));
           else say("Started", "saved");
-          return response.text().then(showRun);
+          var id = response.headers.get("X-Run");
+          return response.text().then(function (html) { showRun(id, html); });
         });
       }, offline).finally(function () { busy = false; });
     }
@@ -167,12 +168,23 @@
       });
       if (fresh.length) mark(Number(fresh[fresh.length - 1].dataset.line));
     }
-    function showRun(html) {
-      mark(null);
-      consoleBox.innerHTML = html;
-      current = consoleBox.querySelector("[data-run]");
-      if (window.htmx) window.htmx.process(consoleBox);
-      stopButton.disabled = false;
+    // The console's websocket, open since the page loaded, brings the run (it was attached
+    // before the answer came). Only when it is not open does the answer's console open the
+    // run's own websocket.
+    var consoleSection = form.querySelector(".console");
+    var consoleOpen = false;
+    consoleSection.addEventListener("htmx:wsOpen", function () { consoleOpen = true; });
+    consoleSection.addEventListener("htmx:wsClose", function () { consoleOpen = false; });
+    function shown(id) { return consoleBox.querySelector('#console-run[data-run="' + id + '"]'); }
+    function showRun(id, html) {
+      if (shown(id)) return;
+      function fallback() {
+        if (shown(id)) return;
+        var place = consoleBox.querySelector("#console-run");
+        place.outerHTML = html;
+        if (window.htmx) window.htmx.process(consoleBox);
+      }
+      if (consoleOpen) setTimeout(fallback, 1500); else fallback();
     }
     function runOngoing() {
       var status = current && current.querySelector("#run-status");
@@ -180,6 +192,8 @@
     }
     // Follow the output, and know when the run ends.
     new MutationObserver(function () {
+      var run = consoleBox.querySelector("#console-run[data-run]");
+      if (run !== current) { current = run; mark(null); }
       var log = consoleBox.querySelector(".console-log");
       if (log) log.scrollTop = log.scrollHeight;
       linkErrorLines();
