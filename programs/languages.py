@@ -3,12 +3,20 @@
 An entry says how to find the interpreter, how the launcher puts the Robot API client on the
 interpreter's search path, and what the editor and a new program start with. Nothing else in
 robotide names a language.
+
+A language whose source is not what runs (blocks: Blockly's JSON) has a compiler; the launcher
+writes what it makes of the source (`Language.program_file`) and runs that. A source that
+cannot compile becomes a program that fails saying why, as an interpreter fails on a syntax
+error, so the run's log says it like any other program's error.
 """
 
+import json
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from programs import blocks
 from runbox import SYSTEM_PATH
 
 CLIENTS_DIR = Path(__file__).resolve().parent / "clients"
@@ -28,6 +36,10 @@ class Language:
     # environment variable -> where the interpreter finds the client, "{clients}" standing for
     # the clients folder; an existing value (PATH) is kept after it
     client_paths: dict[str, str] = field(default_factory=dict)
+    # source -> the program that runs, in the interpreter's language (see above), written to
+    # a file with `compiled_extension`
+    compiler: Callable[[str], str] | None = None
+    compiled_extension: str = ""
 
     def interpreter_path(self) -> str | None:
         for candidate in self.interpreter:
@@ -45,6 +57,13 @@ class Language:
         if path is None:
             raise LanguageUnavailable(self)
         return [path, *self.args, program_file]
+
+    def program_file(self, filename: str, source: str) -> tuple[str, str]:
+        """(name, text) of the file a run writes and runs: the source as saved, or what the
+        compiler makes of it."""
+        if self.compiler is None:
+            return filename, source
+        return str(Path(filename).with_suffix(self.compiled_extension)), self.compiler(source)
 
     def client_env(self, clients_dir: Path = CLIENTS_DIR) -> dict[str, str]:
         return {var: path.format(clients=clients_dir) for var, path in self.client_paths.items()}
@@ -109,6 +128,49 @@ package require robot
 puts "hello robot, my heading is [dict get [robot::sensors] heading]"
 """
 
+# Blockly's JSON serialization of a workspace (see programs.blocks): one print block.
+BLOCKS_TEMPLATE = json.dumps(
+    {
+        "blocks": {
+            "languageVersion": 0,
+            "blocks": [
+                {
+                    "type": "text_print",
+                    "id": "hello",
+                    "x": 40,
+                    "y": 40,
+                    "inputs": {
+                        "TEXT": {
+                            "block": {
+                                "type": "text_join",
+                                "id": "hello-join",
+                                "extraState": {"itemCount": 2},
+                                "inputs": {
+                                    "ADD0": {
+                                        "block": {
+                                            "type": "text",
+                                            "id": "hello-text",
+                                            "fields": {"TEXT": "hello robot, my heading is "},
+                                        }
+                                    },
+                                    "ADD1": {
+                                        "block": {
+                                            "type": "robot_sensor",
+                                            "id": "hello-heading",
+                                            "fields": {"SENSOR": "heading"},
+                                        }
+                                    },
+                                },
+                            }
+                        }
+                    },
+                }
+            ],
+        }
+    },
+    indent=2,
+)
+
 LANGUAGES: dict[str, Language] = {
     lang.name: lang
     for lang in [
@@ -123,6 +185,19 @@ LANGUAGES: dict[str, Language] = {
             template=PYTHON_TEMPLATE,
             env={"PYTHONUNBUFFERED": "1", "PYTHONDONTWRITEBYTECODE": "1"},
             client_paths={"PYTHONPATH": "{clients}/python"},
+        ),
+        Language(
+            name="blocks",
+            label="Blocks",
+            extension=".json",
+            interpreter=("python3",),
+            args=("-u",),
+            install_hint="apt-get install python3",
+            template=BLOCKS_TEMPLATE,
+            env={"PYTHONUNBUFFERED": "1", "PYTHONDONTWRITEBYTECODE": "1"},
+            client_paths={"PYTHONPATH": "{clients}/python"},
+            compiler=blocks.to_runnable_python,
+            compiled_extension=".py",
         ),
         Language(
             name="shell",

@@ -454,10 +454,12 @@ class RobotAgent:
         env = launcher.environment(
             language, self.isolation.home(), extra, clients_dir=self.isolation.clients()
         )
-        program = self.isolation.home() / message["filename"]
+        # What runs: the source, or what its language compiles it to (a blocks program: Python)
+        filename, source = language.program_file(message["filename"], message["source"])
+        program = self.isolation.home() / filename
         argv = [*language.command(str(program)), *map(str, message.get("args", ()))]
         launch = Launch(
-            message["filename"], message["source"].encode(),
+            filename, source.encode(),
             self.isolation.program_command(argv, uid), env,
         )  # fmt: skip
         # The token is good before the program starts: it may call auth at once.
