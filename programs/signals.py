@@ -15,6 +15,9 @@ EXAMPLES = {
     "any_robot.py": "Any robot: forward, turn, stop",
     "im_home.py": "I'm home (barcode landmarks)",
     "voice_move.py": "Say move and the robot moves",
+    # Blocks (Blockly's JSON) for beginners, run as the Python made of them
+    "wall.json": "Stop before the wall (Blocks)",
+    "square.json": "Drive a square (Blocks)",
     # The same program in every language: the Robot API is the same in each.
     **{
         f"wall_turn{lang.extension}": f"Wall and turn ({lang.label})" for lang in LANGUAGES.values()
