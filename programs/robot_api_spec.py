@@ -69,9 +69,9 @@ class Client:
     obj: str  # the robot object in the forms: bot, $bot, or robot (Tcl's namespace, the command)
     accessor: str  # between the object and a call's name
     # JavaScript regular expressions (read by api_help.js): group 1 of `objects` is the name of
-    # a connected robot in a program; group 1 of `constructor` is the connect call's word
+    # a connected robot in a program; group 1 of `connects` is the connect call's word
     objects: str
-    constructor: str
+    connects: str
     values: str  # how JSON values look in the language
     errors: str  # what an error the robot reports becomes
 
@@ -131,7 +131,7 @@ CLIENTS: dict[str, Client] = {
             obj="bot",
             accessor=".",
             objects=r"([A-Za-z_]\w*)\s*=\s*robot\.Robot\(",
-            constructor=r"\brobot\.(Robot)\b",
+            connects=r"\brobot\.(Robot)\b",
             values="objects are dicts, arrays lists, null None",
             errors="raises robot.RobotError (its .code is the JSON-RPC code)",
         ),
@@ -142,7 +142,7 @@ CLIENTS: dict[str, Client] = {
             obj="$bot",
             accessor="->",
             objects=r"(\$[A-Za-z_]\w*)\s*=\s*Robot->new\b",
-            constructor=r"\bRobot->(new)\b",
+            connects=r"\bRobot->(new)\b",
             values="objects are hash references, arrays array references, null undef",
             errors="dies with a Robot::Error ($@->message, $@->code)",
         ),
@@ -153,7 +153,7 @@ CLIENTS: dict[str, Client] = {
             obj="bot",
             accessor=".",
             objects=r"([A-Za-z_]\w*)\s*=\s*Robot\.new\b",
-            constructor=r"\bRobot\.(new)\b",
+            connects=r"\bRobot\.(new)\b",
             values="objects are Hashes with string keys, arrays Arrays, null nil",
             errors="raises Robot::Error (#message, #code)",
         ),
@@ -164,7 +164,7 @@ CLIENTS: dict[str, Client] = {
             obj="bot",
             accessor=":",
             objects=r"([A-Za-z_]\w*)\s*=\s*Robot\.new\(",
-            constructor=r"\bRobot\.(new)\b",
+            connects=r"\bRobot\.(new)\b",
             values="objects and arrays are tables, null nil (Robot.null inside a table)",
             errors="error() with the message and code (catch it with pcall; bot.last_error)",
         ),
@@ -175,7 +175,7 @@ CLIENTS: dict[str, Client] = {
             obj="bot",
             accessor=".",
             objects=r"([A-Za-z_$][\w$]*)\s*=\s*new\s+Robot\(",
-            constructor=r"\bnew\s+(Robot)\b",
+            connects=r"\bnew\s+(Robot)\b",
             values="every call returns a Promise (await it); objects, arrays and null as JSON",
             errors="the Promise rejects with a RobotError (.message, .code)",
         ),
@@ -186,7 +186,7 @@ CLIENTS: dict[str, Client] = {
             obj="robot",
             accessor="::",
             objects=r"\b(robot)::",
-            constructor=r"\brobot::(connect)\b",
+            connects=r"\brobot::(connect)\b",
             values="objects are dicts, arrays lists, null the empty string; pass [huddle ...]"
             " for true, false, null, lists and objects",
             errors="a Tcl error with -errorcode {ROBOT code}",
@@ -198,7 +198,7 @@ CLIENTS: dict[str, Client] = {
             obj="robot",
             accessor=" ",
             objects=r"\b(robot) ",
-            constructor=r"(?!)",
+            connects=r"(?!)",
             values="numbers and texts are printed plain, anything else as JSON; a VALUE is"
             " read as JSON, else as text",
             errors="the message on standard error, exit status 1",
@@ -646,7 +646,7 @@ def by_language(language: str) -> dict:
         "object": client.obj,
         "accessor": client.accessor,
         "objects": client.objects,
-        "constructor": client.constructor,
+        "connects": client.connects,
         "values": client.values,
         "errors": client.errors,
         "calls": calls,
@@ -655,11 +655,11 @@ def by_language(language: str) -> dict:
 
 def _word(client: Client, call: Call, form: str) -> str:
     """What a program writes after the object and accessor to name the call: drive, or the
-    shell's `memory get`; for connect, the word its constructor pattern finds."""
+    shell's `memory get`; for connect, the word its `connects` pattern finds."""
     prefix = client.obj + client.accessor
     at = form.find(prefix)
     if call.rpc == "auth" or at < 0:
-        found = re.search(client.constructor, form)
+        found = re.search(client.connects, form)
         return found.group(1) if found else call.name
     rest = form[at + len(prefix) :]
     return re.match(r"[\w ]*?(?=\s*[(<\[?]|$)", rest).group(0).strip()

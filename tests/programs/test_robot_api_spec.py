@@ -102,7 +102,7 @@ def test_every_language_is_json_and_its_patterns_are_regular_expressions():
     for language in CLIENTS:
         help_ = json.loads(json.dumps(by_language(language)))
         re.compile(help_["objects"])
-        re.compile(help_["constructor"])
+        re.compile(help_["connects"])
         calls = help_["calls"]
         assert len(calls) == len({(c["word"], c["signature"]) for c in calls}), language
         for call in help_["calls"]:
