@@ -24,6 +24,7 @@ ERRORS = {
     "javascript": "const { Robot } = require('robot');\n"
     "(async () => { const bot = new Robot(); await bot.sensor('gps'); })();\n",
     "tcl": "package require robot\nrobot::sensor gps\n",
+    "blocks": '{"blocks": {"blocks": [{"type": "robot_sensor", "fields": {"SENSOR": "gps"}}]}}',
 }
 UNKNOWN_METHOD = {
     "python": "import robot\nrobot.Robot().call('fly', 1)\n",
@@ -34,6 +35,8 @@ UNKNOWN_METHOD = {
     "javascript": "const { Robot } = require('robot');\n"
     "(async () => { const bot = new Robot(); await bot.call('fly', 1); })();\n",
     "tcl": "package require robot\nrobot::call fly 1\n",
+    # Blocks refuse a block they do not know before anything is called.
+    "blocks": '{"blocks": {"blocks": [{"type": "robot_fly"}]}}',
 }
 
 
@@ -45,7 +48,8 @@ def app(tmp_path_factory):
 
 
 def test_every_language_is_available(app):
-    assert set(LANGUAGES) == {"python", "shell", "perl", "ruby", "lua", "javascript", "tcl"}
+    expected = {"python", "blocks", "shell", "perl", "ruby", "lua", "javascript", "tcl"}
+    assert set(LANGUAGES) == expected
     missing = [lang.name for lang in LANGUAGES.values() if not lang.available]
     assert not missing, f"interpreters missing: {missing}"
 
