@@ -15,8 +15,6 @@ from __future__ import annotations
 
 import difflib
 
-from asgiref.sync import async_to_sync
-from channels.layers import get_channel_layer
 from django.contrib.auth.decorators import login_required
 from django.core.exceptions import PermissionDenied
 from django.http import HttpRequest, HttpResponse, JsonResponse
@@ -27,7 +25,6 @@ from django.views.decorators.http import require_GET, require_POST
 from programs.access import EDIT, can, get_program_for_user
 from programs.forms import EditProgramForm
 from programs.models import Draft, Program
-from robots.bus import console_group
 from robots.models import get_robot_for_user
 from robots.runs import RunRefused, start_run
 from robots.views import robot_state_context
@@ -76,11 +73,8 @@ def program_start(request: HttpRequest, program_id: int) -> HttpResponse:
         return _conflict(conflict)
     except (ValueError, RunRefused, PermissionDenied) as exc:
         return JsonResponse({"error": str(exc)}, status=400)
-    # The page's console websocket, if open, follows the run from now on, before this answer
-    # reaches the page; the answer is the console that opens the run's own, in case not.
-    async_to_sync(get_channel_layer().group_send)(
-        console_group(program.pk, request.user.pk), {"type": "console.attach", "run_id": run.pk}
-    )
+    # The page's console websocket, if open, already follows the run (robots.runs); this
+    # console opens the run's own websocket, for a page whose console's is not open.
     response = render(request, "programs/_console.html", {"run": run})
     response["X-Run"] = str(run.pk)
     if revision is not None:
