@@ -1,15 +1,24 @@
 """Robot API help in the workbench's editor, in a real browser: Ctrl-Space completes the
 API's calls with their signatures, pointing at a call or F1 shows its help, and attaching
-again switches the language. The workbench does not load api_help.js yet, so the tests put
-it on the page as its template will."""
+again switches the language. The workbench does not load api_help.js yet: the tests put it
+on the page, by hand and as the two lines its template needs would (WORKBENCH_LINES)."""
+
+import re
 
 import pytest
+from django.template import Context, Template
 from playwright.sync_api import Page, expect
 
 from tests.browser.test_pages import editor_text, set_editor_text, sign_in
 
 PYTHON = "import robot\n\nbot = robot.Robot()\n"
 LUA = "local Robot = require('robot')\nlocal bot = Robot.new()\n"
+
+# The two lines templates/programs/edit.html needs, after editor.js's.
+WORKBENCH_LINES = """\
+{% load static %}<link rel="stylesheet" href="{% static 'robotide/api_help.css' %}">
+<script src="{% static 'robotide/api_help.js' %}" data-help="{% url 'robot-api-page' %}" \
+data-show-hint="{% static 'vendor/codemirror/addon/hint/show-hint.js' %}" defer></script>"""
 
 
 @pytest.fixture
@@ -202,19 +211,23 @@ def test_shell_and_tcl_name_their_calls_their_own_way(bench):
     assert editor_text(page).endswith("robot::drive 0.2")
 
 
-def test_the_workbench_way_attaches_itself_and_follows_the_language(bench):
+def test_the_workbench_template_lines_attach_it_and_follow_the_language(bench):
     page = bench
-    page.add_style_tag(url="/static/robotide/api_help.css")
-    # What the workbench template will load: the script, told where the help and show-hint are.
-    page.evaluate(
-        """() => {
-          const tag = document.createElement('script');
-          tag.src = '/static/robotide/api_help.js';
-          tag.dataset.help = '/help/robot-api/';
-          tag.dataset.showHint = '/static/vendor/codemirror/addon/hint/show-hint.js';
-          document.head.appendChild(tag);
-        }"""
-    )
+    program_url = page.url
+    lines = Template(WORKBENCH_LINES).render(Context())
+
+    def with_the_lines(route):
+        response = route.fetch()
+        body, found = re.subn(
+            r'(<script src="[^"]*robotide/editor\.js"[^>]*></script>)',
+            lambda m: m.group(1) + "\n" + lines,
+            response.text(),
+        )
+        assert found == 1
+        route.fulfill(response=response, body=body)
+
+    page.route(program_url, with_the_lines)
+    page.goto(program_url)
     help_for(page, "python")
     type_at_end(page, "bot.st")
     page.keyboard.press("Control+Space")

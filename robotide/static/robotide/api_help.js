@@ -368,10 +368,10 @@
     follow();
     if (choice) choice.addEventListener("change", follow);
   }
-  if (document.readyState === "loading") {
+  // A deferred script runs before DOMContentLoaded, when editor.js has not made the editor yet.
+  if (document.readyState !== "complete") {
     document.addEventListener("DOMContentLoaded", autoAttach);
-    window.addEventListener("load", autoAttach);  // in case the editor came after us
-  } else {
-    autoAttach();
+    window.addEventListener("load", autoAttach);
   }
+  autoAttach();
 })();
