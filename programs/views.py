@@ -103,6 +103,7 @@ def program_edit(request: HttpRequest, program_id: int) -> HttpResponse:
 def _render_editor(request, program, form, status=200, conflict=None):
     context = {
         "conflict": conflict,
+        "blocks": program.language == "blocks",
         "program": program,
         "form": form,
         "language": program.lang,
@@ -118,7 +119,12 @@ def _render_editor(request, program, form, status=200, conflict=None):
     if draft := workbench.draft_to_offer(request.user, program):
         context["draft"] = draft
         context["draft_data"] = {"source": draft.source, "language": draft.language}
-    return render(request, "programs/edit.html", context, status=status)
+    response = render(request, "programs/edit.html", context, status=status)
+    if context["blocks"]:
+        # Blockly injects its stylesheet as a <style> element: allowed on this page only,
+        # and for styles only (scripts stay our own files).
+        response._csp_update = {"style-src": ["'unsafe-inline'"]}
+    return response
 
 
 @login_required

@@ -15,15 +15,17 @@ from __future__ import annotations
 
 import difflib
 
+from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.core.exceptions import PermissionDenied
 from django.http import HttpRequest, HttpResponse, JsonResponse
-from django.shortcuts import render
+from django.shortcuts import redirect, render
 from django.utils import timezone
 from django.views.decorators.http import require_GET, require_POST
 
+from programs import blocks
 from programs.access import EDIT, can, get_program_for_user
-from programs.forms import EditProgramForm
+from programs.forms import EditProgramForm, free_name
 from programs.models import Draft, Program
 from robots.models import get_robot_for_user
 from robots.runs import RunRefused, start_run
@@ -128,6 +130,37 @@ def forget_draft(user, program: Program) -> None:
 
 def _errors(form) -> list[str]:
     return [error for errors in form.errors.values() for error in errors]
+
+
+@login_required
+@require_POST
+def blocks_python(request: HttpRequest, program_id: int) -> JsonResponse:
+    """The Python a blocks text runs as, for the read-only pane beside the blocks."""
+    get_program_for_user(request.user, program_id)
+    source = request.POST.get("source", "")
+    if not source.strip():
+        return JsonResponse({"python": "# No blocks yet: drag some from the toolbox.\n"})
+    try:
+        return JsonResponse({"python": blocks.to_python(source)})
+    except ValueError as exc:
+        return JsonResponse({"error": str(exc)}, status=400)
+
+
+@login_required
+@require_POST
+def blocks_as_python(request: HttpRequest, program_id: int) -> HttpResponse:
+    """A new Python program of the user's from the blocks as they are in the editor."""
+    program = get_program_for_user(request.user, program_id)
+    try:
+        code = blocks.to_python(request.POST.get("source", program.source))
+    except ValueError as exc:
+        messages.error(request, f"These blocks do not make a program yet: {exc}")
+        return redirect("program-edit", program.pk)
+    name = free_name(request.user, f"{program.name} (Python)")
+    copy = Program.objects.create(owner=request.user, name=name, language="python")
+    copy.save_source(code, request.user)
+    messages.success(request, f"Copied as the Python program {copy.name}.")
+    return redirect("program-edit", copy.pk)
 
 
 def _save(request: HttpRequest, program: Program) -> int:

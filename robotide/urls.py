@@ -26,6 +26,16 @@ urlpatterns = [
     path("programs/<int:program_id>/start", workbench.program_start, name="program-start"),
     path("programs/<int:program_id>/panel", workbench.program_panel, name="program-panel"),
     path("programs/<int:program_id>/draft", workbench.program_draft, name="program-draft"),
+    path(
+        "programs/<int:program_id>/blocks/python",
+        workbench.blocks_python,
+        name="program-blocks-python",
+    ),
+    path(
+        "programs/<int:program_id>/blocks/as-python",
+        workbench.blocks_as_python,
+        name="program-blocks-as-python",
+    ),
     path("programs/<int:program_id>/download", programs.program_download, name="program-download"),
     path("programs/<int:program_id>/delete", programs.program_delete, name="program-delete"),
     path("programs/<int:program_id>/email", programs.program_email, name="program-email"),

@@ -2,6 +2,7 @@
 lose what was typed (unsaved-changes guard, an expired sign-in, a conflicting save)."""
 
 import re
+from pathlib import Path
 
 import pytest
 from playwright.sync_api import Page, expect
@@ -15,6 +16,7 @@ from tests.browser.test_pages import (
     sign_in,
 )
 
+ROOT = Path(__file__).resolve().parents[2]
 COUNTDOWN = """\
 import robot
 
@@ -233,3 +235,51 @@ def test_without_scripts_a_conflicting_save_is_refused_with_the_difference(new_p
     expect(page.locator("textarea#source")).to_have_value("print('mine')\n")  # kept
     page.get_by_role("button", name="Save", exact=True).click()
     expect(page.locator(".messages")).to_contain_text("Saved (revision 3)")
+
+
+def test_a_blocks_program_runs_on_sim_and_stops_before_the_wall(bench, appliance, screenshot):
+    page = bench
+    response = appliance.api(
+        "POST", "/api/programs", {"name": "Bench blocks", "language": "blocks", "source": ""}
+    )
+    assert response.status_code == 201, response.text
+    program = response.json()["id"]
+    appliance.api("POST", "/api/robots/sim/resume")  # whatever an earlier test pressed
+    page.goto(f"/programs/{program}/")
+    expect(page.locator("#blocks-area .blocklySvg")).to_be_visible()
+    expect(page.locator(".CodeMirror")).to_have_count(0)  # blocks, not text
+    # Blockly's own stylesheet applies (the page's policy lets its <style> in): the toolbox
+    # is a column beside the workspace, not a list across it.
+    toolbox = page.locator(".blocklyToolbox, .blocklyToolboxDiv").first.bounding_box()
+    assert toolbox["height"] > toolbox["width"], toolbox
+    # Built through Blockly's API in the page, as dragging would: the wall example's blocks.
+    wall = (ROOT / "programs" / "examples" / "wall.json").read_text()
+    page.evaluate("json => window.robotideBlocksEditor.load(json)", wall)
+    page.evaluate("() => window.robotideBlocksEditor.workspace.getTopBlocks()[0].moveBy(20, 0)")
+    python = page.locator("#blocks-python")
+    expect(python).to_contain_text("while not (bot.sensor('range') < 0.4):")
+    expect(page.locator("#save-state")).to_have_text("Unsaved changes")
+    screenshot(page, "workbench-blocks")
+    page.keyboard.press("Control+Enter")
+    console = page.locator("#console")
+    expect(console.locator("#run-status .state")).to_have_text("finished", timeout=30_000)
+    expect(console.locator("#log-lines .ln.o").last).to_contain_text("m before the wall")
+    sensors = appliance.api("GET", "/api/robots/sim/sensors").json()
+    assert 0.25 < sensors["range"] < 0.45 and not sensors["bumper"], sensors
+    saved = appliance.api("GET", f"/api/programs/{program}").json()
+    assert '"robot_drive"' in saved["source"]  # stored as Blockly's JSON
+
+
+def test_blocks_copied_as_a_python_program(bench, appliance):
+    page = bench
+    wall = (ROOT / "programs" / "examples" / "square.json").read_text()
+    response = appliance.api(
+        "POST", "/api/programs", {"name": "Bench square", "language": "blocks", "source": wall}
+    )
+    program = response.json()["id"]
+    page.goto(f"/programs/{program}/")
+    expect(page.locator("#blocks-python")).to_contain_text("bot = robot.Robot()")
+    page.get_by_role("button", name="Copy as a Python program").click()
+    expect(page.get_by_role("heading", name="Bench square (Python)")).to_be_visible()
+    expect(page.locator(".CodeMirror")).to_be_visible()
+    assert "Generated from a blocks program" in editor_text(page)

@@ -4,7 +4,8 @@
   "use strict";
   document.addEventListener("DOMContentLoaded", function () {
     var textarea = document.getElementById("source");
-    if (!textarea || typeof CodeMirror === "undefined") return;
+    // A blocks program is edited as blocks (blocks_bench.js); its text is Blockly's JSON.
+    if (!textarea || typeof CodeMirror === "undefined" || textarea.dataset.blocks) return;
     var form = textarea.form;
     function press(action) {
       var button = form.querySelector('button[name="action"][value="' + action + '"]');
