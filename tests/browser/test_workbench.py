@@ -283,3 +283,17 @@ def test_blocks_copied_as_a_python_program(bench, appliance):
     expect(page.get_by_role("heading", name="Bench square (Python)")).to_be_visible()
     expect(page.locator(".CodeMirror")).to_be_visible()
     assert "Generated from a blocks program" in editor_text(page)
+
+
+def test_the_workbench_completes_robot_api_calls(bench, appliance):
+    page = bench
+    program = new_program(appliance, "Bench help", "import robot\nbot = robot.Robot()\n")
+    open_bench(page, program)
+    page.locator(".CodeMirror").click()
+    page.keyboard.press("Control+End")
+    page.keyboard.type("bot.dr")
+    page.keyboard.press("Control+Space")
+    hints = page.locator(".CodeMirror-hints")
+    expect(hints).to_contain_text("drive")
+    page.keyboard.press("Enter")
+    assert "bot.drive(" in editor_text(page)
