@@ -166,7 +166,10 @@ async def test_velocity_is_refreshed_while_moving(robot, emulator):
 # -- readings --------------------------------------------------------------------------------
 
 
-async def test_sip_fields_are_parsed(robot, emulator):
+async def test_sip_fields_are_parsed(emulator):
+    # ARIA's p3dx-sh file marks the bump rings absent (an accessory): this one has a front one.
+    robot = PioneerRobot(f"pioneer://{emulator.path}", baud=115200, front_bumpers=5)
+    await robot.open()
     emulator.x, emulator.y, emulator.th = 1234.0, -500.0, math.radians(30)
     emulator.wheels = (100, -300)
     emulator.battery = 12.3
@@ -175,14 +178,18 @@ async def test_sip_fields_are_parsed(robot, emulator):
     emulator.stall_right = True
 
     def updated(readings):
-        return readings["sonar"] == pytest.approx([1.0 + 0.1 * n for n in range(8)])
+        return readings["sonar"][:8] == pytest.approx([1.0 + 0.1 * n for n in range(8)])
 
     readings = await until(lambda: _when(robot, updated))
+    await robot.close()
+    assert len(readings["sonar"]) == 16  # the model's ring: 8 front, 8 rear discs
+    assert readings["bumpers"] == {"front": [False, False, True, False, False]}
     assert readings["position"] == pytest.approx(
         {"x": 1.234, "y": -0.5, "theta": math.radians(30)}, abs=2e-3
     )
     assert readings["wheels"] == {"left": 0.1, "right": -0.3}
-    assert readings["velocity"] == pytest.approx({"linear": -0.1, "angular": -0.4 / 0.357})
+    # No ROTVEL from this firmware: ARIA's (right - left) / 2 * DiffConvFactor (P3-DX 0.0056).
+    assert readings["velocity"] == pytest.approx({"linear": -0.1, "angular": -400 / 2 * 0.0056})
     assert readings["battery"] == pytest.approx(12.3)
     assert readings["range"] == pytest.approx(1.3)  # min of sonars 3 and 4
     assert readings["bumper"] is True and readings["stall"] is True
