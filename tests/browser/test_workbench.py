@@ -18,12 +18,13 @@ from tests.browser.test_pages import (
 
 ROOT = Path(__file__).resolve().parents[2]
 COUNTDOWN = """\
-import robot
+import robot, time
 
 bot = robot.Robot()
-bot.drive(0.2, 0.5)
+bot.drive(0.2, 1.0)
 for i in (3, 2, 1):
     print("countdown", i)
+    time.sleep(0.4)
 bot.stop()
 """
 
@@ -60,6 +61,10 @@ def test_type_ctrl_enter_and_watch_the_output_and_the_robot(bench, appliance, sc
     page.keyboard.press("Control+End")
     page.keyboard.type('print("typed")')
     expect(page.locator("#save-state")).to_have_text("Unsaved changes")
+    camera = page.locator("#bench-panel img.camera")
+    expect(camera).to_be_visible()  # the sim's view
+    page.wait_for_timeout(500)  # a frame or two
+    before = camera.screenshot()
     page.keyboard.press("Control+Enter")
     console = page.locator("#console")
     expect(console.locator("#log-lines .ln.o")).to_have_text(
@@ -70,7 +75,8 @@ def test_type_ctrl_enter_and_watch_the_output_and_the_robot(bench, appliance, sc
     # It came over the console's websocket, open before Run: no connection of its own.
     assert console.locator("#console-run").get_attribute("ws-connect") is None
     expect(page.locator("#save-state")).to_contain_text("Saved (revision 2)")
-    expect(page.locator("#bench-panel img.camera")).to_be_visible()  # the sim's view
+    page.wait_for_timeout(500)
+    assert camera.screenshot() != before, "the robot turned, and its view with it"
     assert_not_reloaded(page)
     screenshot(page, "workbench-finished")
     run_link = console.get_by_role("link", name=re.compile(r"Run #\d+"))
