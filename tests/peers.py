@@ -28,10 +28,13 @@ WIRED = KINDS[1:]
 LINKED = ("nxt", "pioneer", "mavlink", "can")
 
 
-async def start_peer(kind: str, tmp_path: Path, *, other_process: bool = False) -> Any:
+async def start_peer(
+    kind: str, tmp_path: Path, *, other_process: bool = False, **options: Any
+) -> Any:
     """``other_process``: the driver is in another process (a benchmark), so the peer must be
-    reachable from there (CAN on an interface-local UDP multicast group, not in-process)."""
-    peer = _PEERS[kind](tmp_path, other_process=other_process)
+    reachable from there (CAN on an interface-local UDP multicast group, not in-process).
+    ``options`` go to the peer (a Pioneer's ``model``)."""
+    peer = _PEERS[kind](tmp_path, other_process=other_process, **options)
     await peer.start()
     return peer
 
@@ -89,10 +92,10 @@ class DtmfPeer:
 class PioneerPeer:
     """The ARCOS robot emulator on TCP, which checks every packet's checksum itself."""
 
-    def __init__(self, tmp_path: Path, **_: Any) -> None:
+    def __init__(self, tmp_path: Path, model: str = "p3dx-sh", **_: Any) -> None:
         from tests.rhal.arcos_emulator import ArcosEmulator
 
-        self.emulator = ArcosEmulator()
+        self.emulator = ArcosEmulator(model)
 
     async def start(self) -> None:
         self.port = await self.emulator.start_tcp()

@@ -26,12 +26,14 @@ async def robot_on(tmp_path):
     # database) must not reach this test's agent.
     await get_channel_layer().flush()
 
-    async def start(kind):
-        peer = await start_peer(kind, tmp_path)
-        robot = await database_sync_to_async(Robot.objects.create)(name=kind, url=peer.url)
+    async def start(kind, name=None, **peer_options):
+        """``name``: the robot's, if not its kind (several of one kind in a test)."""
+        name = name or kind
+        peer = await start_peer(kind, tmp_path, **peer_options)
+        robot = await database_sync_to_async(Robot.objects.create)(name=name, url=peer.url)
         started.append(peer)
-        agent = await serve(kind)
-        user = await database_sync_to_async(User.objects.create_user)(f"student-{kind}")
+        agent = await serve(name)
+        user = await database_sync_to_async(User.objects.create_user)(f"student-{name}")
         return peer, agent, robot, user
 
     async def serve(kind):

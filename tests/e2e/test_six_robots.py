@@ -6,6 +6,9 @@ runs on each, and the robot's own stop is seen on the wire when a program ends, 
 browser that drove it leaves, and on an emergency stop.
 """
 
+import asyncio
+import json
+import math
 import time
 
 import pytest
@@ -17,6 +20,7 @@ from robots.bus import ask_agent, send_to_agent
 from robots.consumers import RobotConsumer
 from tests.e2e.agents import finished, output_of, run_program, until
 from tests.peers import KINDS, LINKED, WIRED
+from tests.rhal.arcos_models import MODELS
 
 pytestmark = pytest.mark.django_db(transaction=True)
 
@@ -237,3 +241,45 @@ async def test_staff_take_over_from_a_program_and_students_cannot(robot_on):
     await staff.disconnect()
     await student.disconnect()
     await ask_agent("pioneer", "robot.estop")
+
+
+# -- every Pioneer model the emulator knows ----------------------------------------------------
+
+FORWARD_TURN_STOP = """
+import json, time, robot
+bot = robot.Robot()
+pose = lambda: bot.sensors()["position"]
+start = pose()
+bot.drive(0.3, 0.0); time.sleep(1.0); bot.stop(); time.sleep(0.4)
+moved = pose()
+bot.drive(0.0, 0.6); time.sleep(1.0); bot.stop(); time.sleep(0.4)
+print(json.dumps([start, moved, pose()]))
+"""
+AT_ONCE = 8  # models driven at the same time
+
+
+async def test_every_pioneer_model_reports_the_distance_and_turn_it_made(robot_on):
+    """The unchanged "forward, turn, stop" program on each model's emulator: the distance and
+    turn the driver reports agree with the emulator's true pose within 5 %."""
+    gate = asyncio.Semaphore(AT_ONCE)
+
+    async def drive(number, model):
+        async with gate:
+            peer, agent, robot, user = await robot_on("pioneer", f"pioneer-{number}", model=model)
+            run = await finished(await run_program(user, robot, FORWARD_TURN_STOP))
+        assert run.state == "finished", f"{model}: {run.state}: {run.reason}"
+        start, moved, turned = json.loads(output_of(run).splitlines()[-1])
+        x, y, theta = peer.emulator.true_pose()  # it stood at 0, 0, 0 when opened
+        distance = math.hypot(moved["x"] - start["x"], moved["y"] - start["y"])
+        turn = math.remainder(turned["theta"] - start["theta"], math.tau)
+        return model, (distance, math.hypot(x, y)), (turn, theta)
+
+    results = await asyncio.gather(*(drive(n, m) for n, m in enumerate(sorted(MODELS))))
+    wrong = [
+        f"{model}: {what} {reported:.3f}, truly {true:.3f}"
+        for model, *pairs in results
+        for what, (reported, true) in zip(("distance", "turn"), pairs, strict=True)
+        if not abs(reported - true) <= 0.05 * abs(true)
+    ]
+    assert not wrong, "\n".join(wrong)
+    assert all(true > 0.2 for _, (_, true), _ in results)  # they did drive

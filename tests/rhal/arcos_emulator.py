@@ -7,6 +7,22 @@ OPEN/CLOSE/ENABLE/VEL/RVEL/PULSE as the robot's server does (motion only with th
 enabled, and its watchdog stops the motors after 2 s without a command), integrates a pose
 and sends a standard SIP every 100 ms while open.
 
+It is one robot model at a time, from its own table (``tests/rhal/arcos_models.py``,
+transcribed from ARIA's parameter files, not from our driver). The true pose is kept in mm
+and radians (``x``, ``y``, ``th``; ``true_pose()`` in m), and the SIP reports it in the model's
+units, as a real robot or the AMRISim simulator does:
+
+* XPOS/YPOS = mm / DistConvFactor, in 15 bits that wrap;
+* THPOS = heading in the firmware's angle steps: 4096 a turn (1024 on Pioneer 1 / PSOS),
+  which ARIA's files print as AngleConvFactor 0.00153 (0.00614);
+* left/right wheel velocities = mm/s / VelConvFactor, each wheel +- omega / DiffConvFactor
+  from the middle (ARIA: omega = (right - left) / 2 * DiffConvFactor);
+* sonar ranges = mm / RangeConvFactor; bumper bits only for the segments the model has,
+  the rear ring in bits 1-7 and the front ring in bits 9-15 (ARIA's ArBumpers).
+
+VEL is mm/s and RVEL deg/s on every model (ARIA sends them unscaled; AMRISim takes them as
+such), clamped to the model's MaxVelocity and MaxRVelocity.
+
 Every command is recorded in ``commands``; tests set the readings (``sonar``, ``battery``,
 ``front_bumpers``, ...) and read back what the driver said.
 """
@@ -20,6 +36,8 @@ import struct
 import time
 import tty
 from dataclasses import dataclass
+
+from tests.rhal.arcos_models import ArcosModel, get_model
 
 COMMAND_NAMES = {0: "PULSE", 1: "OPEN", 2: "CLOSE", 4: "ENABLE", 11: "VEL", 21: "RVEL"}
 
@@ -46,7 +64,17 @@ def arcos_packet(body: bytes) -> bytes:
 
 
 class ArcosEmulator:
-    def __init__(self, *, name: str = "emulator", sip_interval: float = 0.1) -> None:
+    SONAR_POLL = 0.040  # s: each array of eight discs fires one disc per 40 ms (ARCOS default)
+
+    def __init__(
+        self,
+        model: str | ArcosModel = "p3dx-sh",
+        *,
+        name: str = "emulator",
+        sip_interval: float = 0.1,
+        optional_bumpers: bool = True,
+    ) -> None:
+        self.model = get_model(model)
         self.name = name
         self.sip_interval = sip_interval
         self.watchdog = 2.0  # s, as on a real robot
@@ -56,20 +84,29 @@ class ArcosEmulator:
         self.sips_sent = 0
         self.state = "sync"  # -> "ready" after SYNC2 -> "open" after OPEN -> "sync" on CLOSE
         self.motors = False
-        self.vel = 0  # mm/s, as commanded
-        self.rvel = 0  # deg/s
-        self.x = self.y = 0.0  # mm
+        self.vel = 0  # mm/s, as commanded and clamped to the model's top speed
+        self.rvel = 0  # deg/s, likewise
+        self.x = self.y = 0.0  # mm, the true pose
         self.th = 0.0  # rad, counter-clockwise
         # Readings the next SIPs report; tests change them.
         self.wheels: tuple[int, int] | None = None  # mm/s; None: derived from vel and rvel
         self.battery = 12.6  # V
-        self.sonar = {number: 5000 for number in range(8)}  # mm
-        self.front_bumpers = 0  # bits 0-6
+        self.sonar = {number: 5000 for number in range(self.model.sonar_count)}  # mm
+        self.front_bumpers = 0  # one bit a segment, segment 0 in bit 0
+        self.rear_bumpers = 0
         self.stall_left = self.stall_right = False
         self.compass_byte = 255  # 2-degree units; 255: no compass fitted
+        # Bump rings the SIP has bits for: those the parameter file marks fitted, and with
+        # optional_bumpers the rings it sizes but marks absent (an accessory on P2/P3 bases).
+        model = self.model
+        fitted = (model.front_bumpers, model.rear_bumpers)
+        optional = (model.optional_front_bumpers, model.optional_rear_bumpers)
+        self.bumper_segments = tuple(
+            f or (o if optional_bumpers else 0) for f, o in zip(fitted, optional, strict=True)
+        )
         self._sync_step = 0
         self._last_command = time.monotonic()
-        self._sonar_half = 0
+        self._sonar_next = 0
         self._buffer = bytearray()
         self._write = None
         self._master = self._slave = None
@@ -84,6 +121,16 @@ class ArcosEmulator:
 
     def named(self, name: str) -> list[Command]:
         return [command for command in self.commands if command.name == name]
+
+    def true_pose(self) -> tuple[float, float, float]:
+        """Where the robot really is: x and y in m, heading in rad counter-clockwise."""
+        return self.x / 1000.0, self.y / 1000.0, self.th
+
+    def step(self, seconds: float, dt: float = 0.01) -> None:
+        """Drive on at the current speeds for this much simulated time (no watchdog)."""
+        steps = max(1, round(seconds / dt))
+        for _ in range(steps):
+            self._move(seconds / steps)
 
     def inject(self, data: bytes) -> None:
         """Put raw bytes on the wire to the driver: noise, broken packets."""
@@ -205,10 +252,10 @@ class ArcosEmulator:
             self.motors = arg == 1
             if not self.motors:
                 self.vel = self.rvel = 0
-        elif number == 11 and self.motors:
-            self.vel = arg
-        elif number == 21 and self.motors:
-            self.rvel = arg
+        elif number == 11 and self.motors and arg is not None:
+            self.vel = max(-self.model.max_vel, min(self.model.max_vel, arg))
+        elif number == 21 and self.motors and arg is not None:
+            self.rvel = max(-self.model.max_rvel, min(self.model.max_rvel, arg))
 
     def _sync(self, number: int) -> None:
         if number != 0 and number != self._sync_step:
@@ -216,7 +263,8 @@ class ArcosEmulator:
             return
         reply = bytes([number])
         if number == 2:
-            reply += self.name.encode() + b"\0Pioneer\0p3dx-sh\0"
+            for text in (self.name, self.model.robot_class, self.model.subclass):
+                reply += text.encode() + b"\0"
             self.state = "ready"
         self._sync_step = number + 1
         self._send(arcos_packet(reply))
@@ -245,31 +293,65 @@ class ArcosEmulator:
             if (self.vel or self.rvel) and now - self._last_command > self.watchdog:
                 self.vel = self.rvel = 0
                 self.watchdog_trips += 1
-            # Straight along the mean heading: exact enough at 10 Hz.
-            turn = math.radians(self.rvel) * dt
-            self.x += self.vel * dt * math.cos(self.th + turn / 2)
-            self.y += self.vel * dt * math.sin(self.th + turn / 2)
-            self.th = math.remainder(self.th + turn, math.tau)
+            self._move(dt)
             self._send(arcos_packet(self.sip()))
             self.sips_sent += 1
 
-    def sip(self) -> bytes:
-        """A standard SIP body for the current state; half the sonar ring in each."""
+    def _move(self, dt: float) -> None:
+        # Straight along the mean heading: exact for a line or a spin, close on an arc.
+        turn = math.radians(self.rvel) * dt
+        self.x += self.vel * dt * math.cos(self.th + turn / 2)
+        self.y += self.vel * dt * math.sin(self.th + turn / 2)
+        self.th = math.remainder(self.th + turn, math.tau)
+
+    def wheel_speeds(self) -> tuple[float, float]:
+        """Left and right wheel speeds in mm/s: each wheel omega / DiffConvFactor off the middle."""
         if self.wheels is not None:
-            left, right = self.wheels
-        else:
-            spin = math.radians(self.rvel) * 165  # mm/s at each wheel, half a 330 mm track
-            left, right = round(self.vel - spin), round(self.vel + spin)
-        numbers = sorted(self.sonar)
-        half = numbers[self._sonar_half :: 2]
-        self._sonar_half ^= 1
-        stall_bumpers = self.stall_left | self.front_bumpers << 1 | self.stall_right << 8
+            return self.wheels
+        spin = math.radians(self.rvel) / self.model.diff_conv
+        return self.vel - spin, self.vel + spin
+
+    def sonar_batch(self) -> list[int]:
+        """The discs whose readings the next SIP carries.
+
+        The firmware fires one disc per array of eight every 40 ms and a SIP carries the
+        readings taken since the last one: 2.5 per array in 100 ms on average. The emulator
+        takes two per array a SIP from the ring (the discs ``sonar`` holds a range for). Its
+        order, even-numbered discs first, then odd, is its own: the firmware's is the POLLING
+        sequence (each array's discs in order by default), which clients do not rely on.
+        """
+        discs = sorted(n for n in self.sonar if 0 <= n < self.model.sonar_count)
+        if not discs:
+            return []
+        order = discs[::2] + discs[1::2]
+        per_array = max(1, int(self.sip_interval / self.SONAR_POLL + 1e-9))
+        count = min(len(order), per_array * self.model.sonar_arrays)
+        start = self._sonar_next % len(order)
+        self._sonar_next = start + count
+        return [order[(start + i) % len(order)] for i in range(count)]
+
+    def sip(self) -> bytes:
+        """A standard SIP body for the current state, in the model's units."""
+        model = self.model
+        left, right = (_int16(speed / model.vel_conv) for speed in self.wheel_speeds())
+        units = model.angle_units_per_turn
+        heading = (round(self.th * units / math.tau) + units // 2) % units - units // 2
+        front_segments, rear_segments = self.bumper_segments
+        # STALL_AND_BUMPERS as ARIA reads it (ArRobot, ArBumpers): bit 0 left wheel stalled,
+        # bits 1-7 the rear ring, bit 8 right wheel stalled, bits 9-15 the front ring.
+        stall_bumpers = (
+            self.stall_left
+            | (self.rear_bumpers & ((1 << rear_segments) - 1)) << 1
+            | self.stall_right << 8
+            | (self.front_bumpers & ((1 << front_segments) - 1)) << 9
+        )
+        batch = self.sonar_batch()
         body = struct.pack(
             "<BHHhhhBHhHBB",
             0x33 if self.vel or self.rvel else 0x32,
-            round(self.x) & 0x7FFF,
-            round(self.y) & 0x7FFF,
-            round(self.th * 4096 / math.tau),
+            round(self.x / model.dist_conv) & 0x7FFF,
+            round(self.y / model.dist_conv) & 0x7FFF,
+            heading,
             left,
             right,
             min(255, round(self.battery * 10)),
@@ -277,10 +359,15 @@ class ArcosEmulator:
             0,  # CONTROL
             int(self.motors),  # FLAGS bit 0: motors enabled
             self.compass_byte,
-            len(half),
+            len(batch),
         )
-        for number in half:
-            body += struct.pack("<BH", number, self.sonar[number])
+        for number in batch:
+            reading = round(self.sonar[number] / model.range_conv)
+            body += struct.pack("<BH", number, max(0, min(0xFFFF, reading)))
         # GRIPSTATE, ANPORT, ANALOG, DIGIN, DIGOUT, BATTERYX10, CHARGESTATE
         body += struct.pack("<5BHB", 0, 0, 0, 0, 0, round(self.battery * 10), 0)
         return body
+
+
+def _int16(value: float) -> int:
+    return max(-0x8000, min(0x7FFF, round(value)))
