@@ -34,7 +34,7 @@ laser variant (it has 16 sonar, the rear ring only) and has its own entry.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 REPOSITORY = "reedhedges/AriaCoda"
 
@@ -227,7 +227,24 @@ _MODELS = [
     _model("psos43m", (0.05066, 0.00614, 2.5332, 0.1734, 0.00333), (400, 100), P1_7, (0, 0), **P1),
 ]  # fmt: skip
 
+# Files that differ from their base model only in the laser (or sonar board) fitted: the same
+# robot on the wire.
+_LASER_VARIANTS = {
+    "amigo-sh-tim3xx": "amigo-sh",
+    "p3at-sh-lms1xx": "p3at-sh",
+    "p3at-sh-lms500": "p3at-sh",
+    "p3dx-sh-lms1xx": "p3dx-sh",
+    "p3dx-sh-lms500": "p3dx-sh",
+    "peoplebot-sh-lms1xx": "peoplebot-sh",
+    "peoplebot-sh-lms500": "peoplebot-sh",
+    "pioneer-lx-ld": "pioneer-lx",
+    "powerbot-sh-lms500": "powerbot-sh",
+    "researchPB-lms500": "researchPB",
+}
 MODELS: dict[str, ArcosModel] = {model.subclass: model for model in _MODELS}
+MODELS.update(
+    {name: replace(MODELS[base], subclass=name) for name, base in _LASER_VARIANTS.items()}
+)
 
 
 def get_model(model: str | ArcosModel) -> ArcosModel:
