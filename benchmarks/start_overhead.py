@@ -399,6 +399,25 @@ def med_p90(rows: list[dict], key: str) -> str:
     return f"median {med * MS:.2f} ms, p90 {p90 * MS:.2f} ms, n={n}"
 
 
+def target_figures(name: str, rows, key: str, bare: tuple[float, float], note="") -> list:
+    """Median and p90 of ``key`` against the target: 1.2 x the bare start's + 15 ms."""
+    (value_med, value_p90, n), figures = stats(rows, key), []
+    for label, value, base in (("median", value_med, bare[0]), ("p90", value_p90, bare[1])):
+        bound = 1.2 * base + 0.015
+        figures.append(
+            Figure(
+                BENCH,
+                f"{name}, {label}",
+                value * MS,
+                "ms",
+                f"<= {bound * MS:.1f} ms (1.2 x {base * MS:.1f} + 15)",
+                value <= bound,
+                f"n={n}" + (f"; {note}" if note else "") if label == "median" else "",
+            )
+        )
+    return figures
+
+
 def appliance_figures(bare_cmds, bare, app_rows, boxed) -> list[Figure]:
     figures = []
     for name in SOURCES:
@@ -410,38 +429,15 @@ def appliance_figures(bare_cmds, bare, app_rows, boxed) -> list[Figure]:
         if bad:
             note += f"; runs not finished {END_TIMEOUT:g} s after their output, by state: {bad}"
         b_med, b_p90, b_n = stats(bare[f"bare {name}"], "first")
-        for label, (value, base) in {
-            "median": (stats(rows, "ws")[0], b_med),
-            "p90": (stats(rows, "ws")[1], b_p90),
-        }.items():
-            bound = 1.2 * base + 0.015
-            figures.append(
-                Figure(
-                    BENCH,
-                    f"{name}: request -> first line on websocket, {label}",
-                    value * MS,
-                    "ms",
-                    f"<= {bound * MS:.1f} ms (1.2 x {base * MS:.1f} + 15)",
-                    value <= bound,
-                    f"n={stats(rows, 'ws')[2]}; " + note if label == "median" else "",
-                )
-            )
-        for label, (value, base) in {
-            "median": (stats(rows, "console")[0], b_med),
-            "p90": (stats(rows, "console")[1], b_p90),
-        }.items():
-            bound = 1.2 * base + 0.015
-            figures.append(
-                Figure(
-                    BENCH,
-                    f"{name}: request -> first line on the open workbench console, {label}",
-                    value * MS,
-                    "ms",
-                    f"<= {bound * MS:.1f} ms (1.2 x {base * MS:.1f} + 15)",
-                    value <= bound,
-                    f"n={stats(rows, 'console')[2]}" if label == "median" else "",
-                )
-            )
+        figures += target_figures(
+            f"{name}: request -> first line on websocket", rows, "ws", (b_med, b_p90), note
+        )
+        figures += target_figures(
+            f"{name}: request -> first line on the open workbench console",
+            rows,
+            "console",
+            (b_med, b_p90),
+        )
         f_med, f_p90, _ = stats(rows, "file")
         figures.append(
             Figure(BENCH, f"{name}: request -> first line in log file, median", f_med * MS, "ms")

@@ -13,8 +13,12 @@ emulator, nxt-python's wire format, pymavlink, canopen), never with the driver's
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import importlib
 import math
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +30,23 @@ KINDS = ("sim", "dtmf", "nxt", "pioneer", "mavlink", "can")
 WIRED = KINDS[1:]
 #: Kinds with a link that can be unplugged and plugged back (a sound card's cable can't tell).
 LINKED = ("nxt", "pioneer", "mavlink", "can")
+
+
+@contextlib.contextmanager
+def peer_in_thread(kind: str, tmp_path: Path, **options: Any) -> Iterator[Any]:
+    """A peer served from an event loop of its own in a thread: for tests whose own thread is
+    busy elsewhere (a browser driven by Playwright's sync API)."""
+    loop = asyncio.new_event_loop()
+    thread = threading.Thread(target=loop.run_forever, name=f"{kind} peer", daemon=True)
+    thread.start()
+    peer = asyncio.run_coroutine_threadsafe(start_peer(kind, tmp_path, **options), loop)
+    peer = peer.result(timeout=15)
+    try:
+        yield peer
+    finally:
+        asyncio.run_coroutine_threadsafe(peer.stop(), loop).result(timeout=15)
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(timeout=5)
 
 
 async def start_peer(

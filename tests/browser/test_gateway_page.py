@@ -5,9 +5,7 @@ Rover emulator (tests/rhal/mavlink_emulator.py) over TCP, on an event loop of it
 process; the card reloads itself, and an endpoint added through its form really routes.
 """
 
-import asyncio
 import socket
-import threading
 
 import pytest
 from playwright.sync_api import Page, expect
@@ -15,7 +13,7 @@ from playwright.sync_api import Page, expect
 from tests.appliance import Appliance
 from tests.browser.conftest import SCREENSHOTS
 from tests.browser.test_pages import sign_in
-from tests.peers import start_peer
+from tests.peers import peer_in_thread
 
 ROBOT = "rover"
 
@@ -33,17 +31,9 @@ def appliance(tmp_path_factory):
 @pytest.fixture(scope="module")
 def vehicle(tmp_path_factory):
     """The emulated rover, served from a thread's event loop while this module's tests run."""
-    loop = asyncio.new_event_loop()
-    thread = threading.Thread(target=loop.run_forever, name="mavlink vehicle", daemon=True)
-    thread.start()
     folder = tmp_path_factory.mktemp("vehicle")
-    peer = asyncio.run_coroutine_threadsafe(
-        start_peer("mavlink", folder, other_process=True), loop
-    ).result(timeout=15)
-    yield peer
-    asyncio.run_coroutine_threadsafe(peer.stop(), loop).result(timeout=15)
-    loop.call_soon_threadsafe(loop.stop)
-    thread.join(timeout=5)
+    with peer_in_thread("mavlink", folder, other_process=True) as peer:
+        yield peer
 
 
 @pytest.fixture(scope="module")

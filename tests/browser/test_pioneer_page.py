@@ -5,31 +5,19 @@ A real appliance drives the ARCOS emulator (tests/rhal/arcos_emulator.py) starte
 on an event loop of its own in this process.
 """
 
-import asyncio
-import threading
-
 import pytest
 from playwright.sync_api import expect
 
 from tests.browser.test_pages import sign_in
-from tests.peers import start_peer
+from tests.peers import peer_in_thread
 
 ROBOT = "p3at"
 
 
 @pytest.fixture(scope="module")
 def pioneer(tmp_path_factory):
-    loop = asyncio.new_event_loop()
-    thread = threading.Thread(target=loop.run_forever, name="arcos robot", daemon=True)
-    thread.start()
-    folder = tmp_path_factory.mktemp("pioneer")
-    peer = asyncio.run_coroutine_threadsafe(
-        start_peer("pioneer", folder, model="p3at"), loop
-    ).result(timeout=15)
-    yield peer
-    asyncio.run_coroutine_threadsafe(peer.stop(), loop).result(timeout=15)
-    loop.call_soon_threadsafe(loop.stop)
-    thread.join(timeout=5)
+    with peer_in_thread("pioneer", tmp_path_factory.mktemp("pioneer"), model="p3at") as peer:
+        yield peer
 
 
 @pytest.fixture(scope="module")

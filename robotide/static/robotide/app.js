@@ -2,6 +2,12 @@
 (function () {
   "use strict";
 
+  // A cookie's value, read when asked: the CSRF token changes when one signs in again.
+  window.robotideCookie = function (name) {
+    var found = document.cookie.split("; ").find(function (c) { return c.startsWith(name + "="); });
+    return found ? decodeURIComponent(found.split("=")[1]) : "";
+  };
+
   function followLog() {
     var log = document.getElementById("log");
     var follow = document.getElementById("follow");

@@ -4,10 +4,7 @@
 (function () {
   "use strict";
 
-  function cookie(name) {
-    var found = document.cookie.split("; ").find(function (c) { return c.startsWith(name + "="); });
-    return found ? decodeURIComponent(found.split("=")[1]) : "";
-  }
+  function cookie(name) { return window.robotideCookie(name); }
 
   document.addEventListener("DOMContentLoaded", function () {
     var bench = document.getElementById("blocks-bench");

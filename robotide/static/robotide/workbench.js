@@ -8,10 +8,7 @@
 (function () {
   "use strict";
 
-  function cookie(name) {
-    var found = document.cookie.split("; ").find(function (c) { return c.startsWith(name + "="); });
-    return found ? decodeURIComponent(found.split("=")[1]) : "";
-  }
+  function cookie(name) { return window.robotideCookie(name); }
 
   document.addEventListener("DOMContentLoaded", function () {
     var form = document.getElementById("editor-form");
