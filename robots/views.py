@@ -214,6 +214,10 @@ def robot_estop(request: HttpRequest, name: str) -> HttpResponse:
     via = "the workbench" if request.POST.get("via") == "workbench" else "the robot's page"
     try:
         record = stops.press(request.user, robot, via)
+    except PermissionDenied as exc:
+        if request.htmx:  # the workbench says why on the page
+            return HttpResponse(str(exc), status=403)
+        raise
     except AgentUnavailable as exc:
         level, text = (
             messages.ERROR,

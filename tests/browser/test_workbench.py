@@ -303,3 +303,18 @@ def test_the_workbench_completes_robot_api_calls(bench, appliance):
     expect(hints).to_contain_text("drive")
     page.keyboard.press("Enter")
     assert "bot.drive(" in editor_text(page)
+
+
+def test_the_emergency_stop_beside_the_editor(bench, appliance):
+    page = bench
+    program = new_program(appliance, "Bench e-stop", FOREVER)
+    open_bench(page, program)
+    page.keyboard.press("Control+Enter")
+    console = page.locator("#console")
+    expect(console.locator("#run-status .state")).to_have_text("running")
+    try:
+        page.get_by_role("button", name="EMERGENCY STOP").click()
+        expect(page.locator("#save-state")).to_contain_text("Emergency stop: sim stopped")
+        expect(console.locator("#run-status .state")).to_have_text("stopped")
+    finally:
+        appliance.resume()  # the shared appliance's robot, for the tests after this one
