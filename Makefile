@@ -7,6 +7,7 @@ BIN := $(VENV)/bin
 .PHONY: run test lint bench bench-deps fleet fleet-secrets clean
 
 $(BIN)/robotide: pyproject.toml
+	./scripts/install-build-deps.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'

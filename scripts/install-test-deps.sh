@@ -2,7 +2,8 @@
 # What the tests need from the machine, from Debian's archive, installed only when missing:
 # Chromium (browser tests), util-linux (setpriv, prlimit, unshare), bubblewrap and slirp4netns
 # (the runs' box and the NAT of network 'full'), the languages' interpreters, PostgreSQL and Redis (fleet mode), started
-# if they are not running, espeak-ng and ffmpeg (speech and cameras for programs).
+# if they are not running, espeak-ng and ffmpeg (speech and cameras for programs), OpenLDAP's
+# slapd and ldap-utils (directory sign-in).
 set -eu
 need=""
 have() { command -v "$1" >/dev/null 2>&1 || [ -x "/usr/sbin/$1" ] || [ -x "/sbin/$1" ]; }
@@ -26,6 +27,9 @@ have pg_ctlcluster || need="$need postgresql"
 # Host services for programs (say, the camera) and their tests.
 have espeak-ng || need="$need espeak-ng"
 have ffmpeg || need="$need ffmpeg"
+# A real directory for the LDAP sign-in tests (tests/test_ldap.py starts its own slapd).
+have slapd || need="$need slapd"
+have ldapadd || need="$need ldap-utils"
 if [ -n "$need" ]; then
     if [ "$(id -u)" -ne 0 ]; then
         echo "missing system packages:$need (run as root, or install them)" >&2
