@@ -8,7 +8,7 @@ from django.db import transaction
 from django.db.models import Count
 from django.template.response import TemplateResponse
 
-from robotide.models import ApiToken, ClassTeacher
+from robotide.models import ApiToken, ClassTeacher, DirectoryAccount
 from robotide.security import AdminLoginForm
 
 admin.site.login_form = AdminLoginForm  # throttled like the sign-in page
@@ -142,14 +142,43 @@ def take_away_access(robot, users) -> str:
     return done
 
 
+class DirectoryAccountInline(admin.StackedInline):
+    model = DirectoryAccount
+    can_delete = False
+    readonly_fields = ["dn", "classes", "taught", "last_sign_in"]
+    verbose_name = verbose_name_plural = "from the directory (LDAP)"
+
+    def has_add_permission(self, request, obj=None):
+        return False
+
+
+class OriginFilter(admin.SimpleListFilter):
+    title = "origin"
+    parameter_name = "origin"
+
+    def lookups(self, request, model_admin):
+        return [("directory", "directory (LDAP)"), ("local", "local")]
+
+    def queryset(self, request, queryset):
+        if self.value() in ("directory", "local"):
+            return queryset.filter(directory_account__isnull=self.value() == "local")
+        return queryset
+
+
 admin.site.unregister(User)
 
 
 @admin.register(User)
 class UserAdmin(auth_admin.UserAdmin):
-    inlines = [*auth_admin.UserAdmin.inlines, TeachingInline]
-    list_filter = [*auth_admin.UserAdmin.list_filter, "teaching__group"]
+    inlines = [*auth_admin.UserAdmin.inlines, DirectoryAccountInline, TeachingInline]
+    list_display = [*auth_admin.UserAdmin.list_display, "origin"]
+    list_filter = [*auth_admin.UserAdmin.list_filter, OriginFilter, "teaching__group"]
+    list_select_related = ["directory_account"]
     actions = ["take_robot_access"]
+
+    @admin.display(description="origin", ordering="directory_account")
+    def origin(self, obj):
+        return "directory" if hasattr(obj, "directory_account") else "local"
 
     @admin.action(description="Take away access to a robot…")
     def take_robot_access(self, request, queryset):

@@ -56,3 +56,39 @@ class ClassTeacher(models.Model):
 
     def __str__(self) -> str:
         return f"{self.user} teaches {self.group}"
+
+
+class DirectoryAccount(models.Model):
+    """An account the directory (LDAP) made or signs in; accounts without one are local.
+
+    The classes it last gave are kept so a class the directory drops is dropped here too, while
+    classes an admin added by hand stay.
+    """
+
+    user = models.OneToOneField(
+        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="directory_account"
+    )
+    dn = models.CharField("directory entry", max_length=500)
+    classes = models.JSONField(default=list, blank=True)
+    taught = models.JSONField(default=list, blank=True)
+    last_sign_in = models.DateTimeField(default=timezone.now)
+
+    def __str__(self) -> str:
+        return self.dn
+
+    def sync_classes(self, classes: set[str], teaches: bool) -> None:
+        """Member of ``classes``, or their teacher when ``teaches``; a class is made on first
+        sight. Only what the directory gave before is taken away."""
+        from django.contrib.auth.models import Group
+
+        member_of = set() if teaches else classes
+        taught = classes if teaches else set()
+        groups = {name: Group.objects.get_or_create(name=name)[0] for name in classes}
+        user = self.user
+        user.groups.add(*(groups[n] for n in member_of))
+        user.groups.remove(*Group.objects.filter(name__in=set(self.classes) - member_of))
+        for name in taught:
+            ClassTeacher.objects.get_or_create(group=groups[name], user=user)
+        ClassTeacher.objects.filter(user=user, group__name__in=set(self.taught) - taught).delete()
+        self.classes, self.taught = sorted(member_of), sorted(taught)
+        self.save()

@@ -234,6 +234,86 @@ LOGIN_THROTTLE = {
     "lock_seconds": env_int("ROBOTIDE_LOGIN_LOCK_SECONDS", 300),
 }
 AUTHENTICATION_BACKENDS = ["robotide.security.ThrottledModelBackend"]
+
+
+def ldap_settings() -> dict:
+    """django-auth-ldap's AUTH_LDAP_* settings from ROBOTIDE_LDAP_*; empty when the URI is unset.
+
+    Local accounts (admins, guests) are tried first; the directory is asked on every sign-in,
+    so an account removed there can no longer sign in. Imported only when configured: python-ldap
+    is a C extension a machine without a directory need not load.
+    """
+    uri = os.environ.get("ROBOTIDE_LDAP_URI", "")
+    if not uri:
+        return {}
+    import ldap
+    from django_auth_ldap import config
+
+    def required(name: str) -> str:
+        value = os.environ.get(name, "")
+        if not value:
+            raise ValueError(f"{name} must be set when ROBOTIDE_LDAP_URI is")
+        return value
+
+    attrs = {}
+    for pair in env_list(
+        "ROBOTIDE_LDAP_ATTRS", ["first_name=givenName", "last_name=sn", "email=mail"]
+    ):
+        field, _, attr = pair.partition("=")
+        if field.strip() not in ("first_name", "last_name", "email") or not attr.strip():
+            raise ValueError(
+                f"ROBOTIDE_LDAP_ATTRS: {pair!r} is not first_name=, last_name= or email=<attribute>"
+            )
+        attrs[field.strip()] = attr.strip()
+    group_types = {
+        "groupOfNames": config.GroupOfNamesType,
+        "groupOfUniqueNames": config.GroupOfUniqueNamesType,
+        "posixGroup": config.PosixGroupType,
+        "activeDirectory": config.ActiveDirectoryGroupType,
+        "nestedActiveDirectory": config.NestedActiveDirectoryGroupType,
+    }
+    group_type = os.environ.get("ROBOTIDE_LDAP_GROUP_TYPE") or "groupOfNames"
+    if group_type not in group_types:
+        raise ValueError(f"ROBOTIDE_LDAP_GROUP_TYPE must be one of {', '.join(group_types)}")
+    options = {ldap.OPT_REFERRALS: 0, ldap.OPT_NETWORK_TIMEOUT: 10, ldap.OPT_TIMEOUT: 10}
+    if os.environ.get("ROBOTIDE_LDAP_CA_FILE"):
+        options[ldap.OPT_X_TLS_CACERTFILE] = os.environ["ROBOTIDE_LDAP_CA_FILE"]
+        options[ldap.OPT_X_TLS_NEWCTX] = 0  # last: makes the TLS options above take effect
+    result = {
+        "AUTH_LDAP_SERVER_URI": uri,
+        "AUTH_LDAP_BIND_DN": os.environ.get("ROBOTIDE_LDAP_BIND_DN", ""),
+        "AUTH_LDAP_BIND_PASSWORD": os.environ.get("ROBOTIDE_LDAP_BIND_PASSWORD", ""),
+        "AUTH_LDAP_START_TLS": env_bool("ROBOTIDE_LDAP_START_TLS", False),
+        "AUTH_LDAP_CONNECTION_OPTIONS": options,
+        "AUTH_LDAP_USER_SEARCH": config.LDAPSearch(
+            required("ROBOTIDE_LDAP_USER_BASE"),
+            ldap.SCOPE_SUBTREE,
+            os.environ.get("ROBOTIDE_LDAP_USER_FILTER") or "(uid=%(user)s)",
+        ),
+        "AUTH_LDAP_USER_ATTR_MAP": attrs,
+        "AUTH_LDAP_ALWAYS_UPDATE_USER": True,
+        # Classes, teachers and staff (robotide.directory): from groups under this base.
+        "AUTH_LDAP_GROUP_TYPE": group_types[group_type](),
+        "ROBOTIDE_LDAP_CLASS_FILTER": os.environ.get("ROBOTIDE_LDAP_CLASS_FILTER", ""),
+        "ROBOTIDE_LDAP_TEACHER_FILTER": os.environ.get("ROBOTIDE_LDAP_TEACHER_FILTER", ""),
+    }
+    group_base = os.environ.get("ROBOTIDE_LDAP_GROUP_BASE", "")
+    if group_base:
+        result["AUTH_LDAP_GROUP_SEARCH"] = config.LDAPSearch(group_base, ldap.SCOPE_SUBTREE)
+    elif result["ROBOTIDE_LDAP_CLASS_FILTER"] or result["ROBOTIDE_LDAP_TEACHER_FILTER"]:
+        raise ValueError("ROBOTIDE_LDAP_GROUP_BASE must be set for classes and teachers")
+    if os.environ.get("ROBOTIDE_LDAP_STAFF_GROUP"):
+        result["AUTH_LDAP_USER_FLAGS_BY_GROUP"] = {
+            "is_staff": os.environ["ROBOTIDE_LDAP_STAFF_GROUP"]
+        }
+    return result
+
+
+LDAP = ldap_settings()
+if LDAP:
+    globals().update(LDAP)
+    # After the local accounts, whose backend also refuses a locked-out user name outright.
+    AUTHENTICATION_BACKENDS = [*AUTHENTICATION_BACKENDS, "robotide.directory.DirectoryBackend"]
 # The throttle's counters live in the cache: per process by default, shared through Redis in
 # fleet mode so every web worker sees the same failures.
 if REDIS_URL:

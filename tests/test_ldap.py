@@ -1,0 +1,313 @@
+"""Sign-in through an institution's directory: a real OpenLDAP slapd, started here on a free
+port with a directory of a student, a teacher and a staff member and their groups, and the
+settings robotide.settings builds from ROBOTIDE_LDAP_* for it."""
+
+import shutil
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+from django.contrib.auth.models import Group, User
+from django.core.cache import cache
+from django.test import Client
+
+from programs.models import Program
+from programs.signals import EXAMPLES
+from robotide.models import ClassTeacher, DirectoryAccount
+from tests.conftest import in_ci
+
+pytestmark = pytest.mark.django_db
+
+SLAPD = shutil.which("slapd") or "/usr/sbin/slapd"
+SCHEMAS = Path("/etc/ldap/schema")
+SUFFIX = "dc=uni,dc=test"
+ADMIN_DN, ADMIN_PASSWORD = f"cn=admin,{SUFFIX}", "directory-secret"
+PEOPLE, GROUPS = f"ou=people,{SUFFIX}", f"ou=groups,{SUFFIX}"
+
+
+def person(uid: str, given: str, surname: str, password: str) -> str:
+    return f"""dn: uid={uid},{PEOPLE}
+objectClass: inetOrgPerson
+uid: {uid}
+cn: {given} {surname}
+givenName: {given}
+sn: {surname}
+mail: {uid}@uni.test
+userPassword: {password}
+"""
+
+
+def group(cn: str, *members: str) -> str:
+    lines = "".join(f"member: uid={m},{PEOPLE}\n" for m in members)
+    return f"dn: cn={cn},{GROUPS}\nobjectClass: groupOfNames\ncn: {cn}\n{lines}"
+
+
+DIRECTORY = "\n".join(
+    [
+        f"dn: {SUFFIX}\nobjectClass: dcObject\nobjectClass: organization\ndc: uni\no: Uni\n",
+        f"dn: {PEOPLE}\nobjectClass: organizationalUnit\nou: people\n",
+        f"dn: {GROUPS}\nobjectClass: organizationalUnit\nou: groups\n",
+        person("stu", "Sam", "Student", "stu-pass-1"),
+        person("tea", "Tess", "Teacher", "tea-pass-1"),
+        person("sta", "Stan", "Staff", "sta-pass-1"),
+        group("class-robotics1", "stu", "tea"),
+        group("chess-club", "stu"),  # not a class
+        group("teachers", "tea"),
+        group("staff", "sta"),
+    ]
+)
+
+SLAPD_CONF = """\
+include {schemas}/core.schema
+include {schemas}/cosine.schema
+include {schemas}/inetorgperson.schema
+include {schemas}/nis.schema
+modulepath /usr/lib/ldap
+moduleload back_mdb
+pidfile {dir}/slapd.pid
+database mdb
+maxsize 16777216
+suffix "{suffix}"
+rootdn "{rootdn}"
+rootpw {rootpw}
+directory {dir}/db
+access to attrs=userPassword by anonymous auth by * none
+access to * by * read
+"""
+
+
+def add_entries(conn, ldif: str) -> None:
+    import ldap.modlist
+
+    for entry in ldif.strip().split("\n\n"):
+        lines = [line.split(": ", 1) for line in entry.strip().splitlines()]
+        attrs: dict[str, list[bytes]] = {}
+        for name, value in lines[1:]:
+            attrs.setdefault(name, []).append(value.encode())
+        conn.add_s(lines[0][1], ldap.modlist.addModlist(attrs))
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _unavailable(why: str):
+    if in_ci():
+        pytest.fail(f"OpenLDAP's slapd is needed in CI: {why}")
+    pytest.skip(why)
+
+
+@pytest.fixture(scope="module")
+def slapd(tmp_path_factory):
+    """A running slapd: its URI. Unprivileged port, temporary config and database."""
+    if not Path(SLAPD).exists() or not (SCHEMAS / "inetorgperson.schema").exists():
+        _unavailable("slapd is not installed (Debian: slapd ldap-utils)")
+    import ldap
+
+    where = tmp_path_factory.mktemp("slapd")
+    (where / "db").mkdir()
+    conf = where / "slapd.conf"
+    conf.write_text(
+        SLAPD_CONF.format(
+            schemas=SCHEMAS, dir=where, suffix=SUFFIX, rootdn=ADMIN_DN, rootpw=ADMIN_PASSWORD
+        )
+    )
+    uri = f"ldap://127.0.0.1:{_free_port()}"
+    # -d keeps it in the foreground, our child, ended by the fixture.
+    log = open(where / "slapd.log", "w")  # noqa: SIM115
+    server = subprocess.Popen(
+        [SLAPD, "-f", str(conf), "-h", uri + "/", "-d", "0"], stdout=log, stderr=log
+    )
+    try:
+        deadline = time.monotonic() + 15
+        while True:
+            try:
+                conn = ldap.initialize(uri)
+                conn.simple_bind_s(ADMIN_DN, ADMIN_PASSWORD)
+                break
+            except ldap.LDAPError:
+                if server.poll() is not None or time.monotonic() > deadline:
+                    _unavailable(f"slapd did not start: {(where / 'slapd.log').read_text()}")
+                time.sleep(0.1)
+        add_entries(conn, DIRECTORY)
+        conn.unbind_s()
+        yield uri
+    finally:
+        server.terminate()
+        server.wait(10)
+        log.close()
+
+
+@pytest.fixture
+def directory(slapd, settings, monkeypatch):
+    """The settings robotide.settings makes of these ROBOTIDE_LDAP_* for the test's slapd."""
+    from robotide.settings import ldap_settings
+
+    for name, value in {
+        "ROBOTIDE_LDAP_URI": slapd,
+        "ROBOTIDE_LDAP_BIND_DN": ADMIN_DN,
+        "ROBOTIDE_LDAP_BIND_PASSWORD": ADMIN_PASSWORD,
+        "ROBOTIDE_LDAP_USER_BASE": PEOPLE,
+        "ROBOTIDE_LDAP_USER_FILTER": "(uid=%(user)s)",
+        "ROBOTIDE_LDAP_GROUP_BASE": GROUPS,
+        "ROBOTIDE_LDAP_CLASS_FILTER": "(cn=class-*)",
+        "ROBOTIDE_LDAP_TEACHER_FILTER": "(cn=teachers)",
+        "ROBOTIDE_LDAP_STAFF_GROUP": f"cn=staff,{GROUPS}",
+    }.items():
+        monkeypatch.setenv(name, value)
+    for name, value in ldap_settings().items():
+        setattr(settings, name, value)
+    cache.clear()  # the sign-in throttle's counters
+    settings.AUTHENTICATION_BACKENDS = [
+        "robotide.security.ThrottledModelBackend",
+        "robotide.directory.DirectoryBackend",
+    ]
+    return slapd
+
+
+def sign_in(username: str, password: str) -> tuple[Client, str]:
+    client = Client()
+    response = client.post(
+        "/accounts/login/", {"username": username, "password": password}, follow=True
+    )
+    return client, response.content.decode()
+
+
+def signed_in_as(client: Client) -> str | None:
+    user_id = client.session.get("_auth_user_id")
+    return User.objects.get(pk=user_id).username if user_id else None
+
+
+def test_a_student_signs_in_and_gets_their_class(directory):
+    client, _ = sign_in("stu", "stu-pass-1")
+    assert signed_in_as(client) == "stu"
+    stu = User.objects.get(username="stu")
+    assert (stu.first_name, stu.last_name, stu.email) == ("Sam", "Student", "stu@uni.test")
+    assert [g.name for g in stu.groups.all()] == ["class-robotics1"]  # not the chess club
+    assert not stu.is_staff and not stu.has_usable_password()
+    assert DirectoryAccount.objects.get(user=stu).dn == f"uid=stu,{PEOPLE}"
+    assert client.get("/accounts/").status_code == 200
+
+
+def test_an_account_from_the_directory_gets_the_examples(directory):
+    sign_in("stu", "stu-pass-1")
+    names = set(Program.objects.filter(owner__username="stu").values_list("name", flat=True))
+    assert names == set(EXAMPLES.values())
+
+
+def test_the_teacher_teaches_the_class(directory):
+    client, _ = sign_in("tea", "tea-pass-1")
+    assert signed_in_as(client) == "tea"
+    taught = ClassTeacher.objects.filter(user__username="tea")
+    assert [t.group.name for t in taught] == ["class-robotics1"]
+    assert not User.objects.get(username="tea").groups.exists()  # a teacher, not a member
+
+
+def test_staff_is_staff(directory):
+    client, _ = sign_in("sta", "sta-pass-1")
+    assert signed_in_as(client) == "sta"
+    assert User.objects.get(username="sta").is_staff
+    assert client.get("/admin/").status_code == 200
+
+
+def test_a_class_is_made_once_and_left_when_the_directory_says_so(directory):
+    sign_in("stu", "stu-pass-1")
+    sign_in("stu", "stu-pass-1")
+    assert Group.objects.filter(name="class-robotics1").count() == 1
+    by_hand = Group.objects.create(name="lab-extra")
+    stu = User.objects.get(username="stu")
+    stu.groups.add(by_hand)
+    account = DirectoryAccount.objects.get(user=stu)
+    account.classes = ["class-robotics1", "class-old"]
+    account.save()
+    stu.groups.add(Group.objects.create(name="class-old"))
+    sign_in("stu", "stu-pass-1")
+    names = sorted(stu.groups.values_list("name", flat=True))
+    assert names == ["class-robotics1", "lab-extra"]  # the one added by hand stays
+
+
+def test_a_wrong_password_is_refused(directory):
+    client, page = sign_in("stu", "not-the-password")
+    assert signed_in_as(client) is None
+    assert "enter a correct username and password" in page
+
+
+def test_a_student_removed_from_the_directory_can_no_longer_sign_in(directory):
+    import ldap
+
+    client, _ = sign_in("stu", "stu-pass-1")
+    assert signed_in_as(client) == "stu"
+    conn = ldap.initialize(directory)
+    conn.simple_bind_s(ADMIN_DN, ADMIN_PASSWORD)
+    conn.delete_s(f"uid=stu,{PEOPLE}")
+    try:
+        client, page = sign_in("stu", "stu-pass-1")
+        assert signed_in_as(client) is None
+        assert "enter a correct username and password" in page
+    finally:
+        add_entries(conn, person("stu", "Sam", "Student", "stu-pass-1"))
+        conn.unbind_s()
+
+
+def test_local_admin_still_signs_in(directory):
+    User.objects.create_superuser("admin", password="admin-pass-1")
+    client, _ = sign_in("admin", "admin-pass-1")
+    assert signed_in_as(client) == "admin"
+    assert not DirectoryAccount.objects.filter(user__username="admin").exists()
+
+
+def test_a_directory_entry_does_not_take_over_a_local_account(directory):
+    User.objects.create_user("stu", password="local-pass-1")
+    client, _ = sign_in("stu", "stu-pass-1")
+    assert signed_in_as(client) is None
+    client, _ = sign_in("stu", "local-pass-1")
+    assert signed_in_as(client) == "stu"
+
+
+def test_sign_in_throttling_still_locks_out(directory, settings):
+    settings.LOGIN_THROTTLE = {**settings.LOGIN_THROTTLE, "failures": 3}
+    for _ in range(3):
+        sign_in("stu", "wrong")
+    client, page = sign_in("stu", "stu-pass-1")
+    assert signed_in_as(client) is None
+    assert "Too many failed sign-ins" in page
+
+
+def test_the_admin_shows_where_an_account_comes_from(directory):
+    sign_in("stu", "stu-pass-1")
+    User.objects.create_user("guest", password="guest-pass-1")
+    admin = Client()
+    admin.force_login(User.objects.create_superuser("root", password="root-pass-1"))
+    page = admin.get("/admin/auth/user/").content.decode()
+    assert "column-origin" in page
+    assert page.count(">directory<") == 1 and page.count(">local<") >= 2
+    local = admin.get("/admin/auth/user/?origin=local").content.decode()
+    assert "guest" in local and ">stu<" not in local
+
+
+def test_without_a_uri_ldap_is_off(monkeypatch):
+    from robotide.settings import ldap_settings
+
+    monkeypatch.delenv("ROBOTIDE_LDAP_URI", raising=False)
+    assert ldap_settings() == {}
+
+
+def test_a_half_configured_directory_fails_loudly(monkeypatch):
+    from robotide.settings import ldap_settings
+
+    monkeypatch.setenv("ROBOTIDE_LDAP_URI", "ldap://127.0.0.1:1")
+    monkeypatch.delenv("ROBOTIDE_LDAP_USER_BASE", raising=False)
+    with pytest.raises(ValueError, match="ROBOTIDE_LDAP_USER_BASE"):
+        ldap_settings()
+    monkeypatch.setenv("ROBOTIDE_LDAP_USER_BASE", PEOPLE)
+    monkeypatch.setenv("ROBOTIDE_LDAP_CLASS_FILTER", "(cn=class-*)")
+    monkeypatch.delenv("ROBOTIDE_LDAP_GROUP_BASE", raising=False)
+    with pytest.raises(ValueError, match="ROBOTIDE_LDAP_GROUP_BASE"):
+        ldap_settings()
+    monkeypatch.setenv("ROBOTIDE_LDAP_ATTRS", "phone=telephoneNumber")
+    with pytest.raises(ValueError, match="ROBOTIDE_LDAP_ATTRS"):
+        ldap_settings()
