@@ -287,6 +287,9 @@ def test_the_admin_shows_where_an_account_comes_from(directory):
     assert page.count(">directory<") == 1 and page.count(">local<") >= 2
     local = admin.get("/admin/auth/user/?origin=local").content.decode()
     assert "guest" in local and ">stu<" not in local
+    stu = User.objects.get(username="stu")
+    change = admin.get(f"/admin/auth/user/{stu.pk}/change/").content.decode()
+    assert "From the directory (LDAP)" in change and f"uid=stu,{PEOPLE}" in change
 
 
 def test_without_a_uri_ldap_is_off(monkeypatch):
