@@ -17,6 +17,8 @@
       indentUnit: 4,
       matchBrackets: true,
       viewportMargin: 50,
+      // CodeMirror types into a textarea of its own: it gets the label of ours.
+      screenReaderLabel: textarea.getAttribute("aria-label"),
       extraKeys: {
         "Ctrl-S": function () { press("save"); },
         "Cmd-S": function () { press("save"); },
