@@ -12,7 +12,7 @@ RUN apt-get update && apt-get install -y --no-install-recommends \
 WORKDIR /app
 COPY . /app
 # Editable: the templates/ folder is read from the source tree.
-RUN pip install --no-cache-dir -e /app
+RUN pip install --no-cache-dir -e "/app[ldap]"
 ENV ROBOTIDE_DATA=/data
 EXPOSE 8000
 CMD ["robotide", "up", "--bind", "0.0.0.0:8000"]

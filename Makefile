@@ -7,7 +7,6 @@ BIN := $(VENV)/bin
 .PHONY: run test lint bench bench-deps fleet fleet-secrets clean
 
 $(BIN)/robotide: pyproject.toml
-	./scripts/install-build-deps.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'
@@ -19,6 +18,8 @@ run: $(BIN)/robotide
 
 test: $(BIN)/robotide
 	./scripts/install-test-deps.sh
+	./scripts/install-build-deps.sh
+	$(BIN)/pip install --quiet -e '.[ldap]'
 	$(BIN)/ruff check .
 	$(BIN)/pytest
 

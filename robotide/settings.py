@@ -11,6 +11,7 @@ import secrets
 from pathlib import Path
 
 import dj_database_url
+from django.core.exceptions import ImproperlyConfigured
 
 BASE_DIR = Path(__file__).resolve().parent.parent
 
@@ -246,8 +247,14 @@ def ldap_settings() -> dict:
     uri = os.environ.get("ROBOTIDE_LDAP_URI", "")
     if not uri:
         return {}
-    import ldap
-    from django_auth_ldap import config
+    try:
+        import ldap
+        from django_auth_ldap import config
+    except ImportError as exc:
+        raise ImproperlyConfigured(
+            "ROBOTIDE_LDAP_URI is set but django-auth-ldap is not installed: "
+            "scripts/install-build-deps.sh, then .venv/bin/pip install -e '.[ldap]'"
+        ) from exc
 
     def required(name: str) -> str:
         value = os.environ.get(name, "")
