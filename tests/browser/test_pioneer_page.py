@@ -28,9 +28,7 @@ def p3at(appliance, pioneer):
     appliance.api("DELETE", f"/api/robots/{ROBOT}")
 
 
-def test_the_robot_page_names_the_model_and_where_each_unit_comes_from(
-    new_page, p3at, screenshot
-):
+def test_the_robot_page_names_the_model_and_where_each_unit_comes_from(new_page, p3at, screenshot):
     page = new_page()
     sign_in(page)
     page.goto(f"/robots/{p3at}/")
