@@ -169,7 +169,7 @@ def _save_and_act(request, program: Program, form: EditProgramForm) -> HttpRespo
             return _start(request, program, request.POST.get("robot", ""))
         raise PermissionDenied("This program is shared with you read-only: save a copy.")
     try:
-        workbench.check_base(program, request.POST.get("base_revision", ""), data["source"])
+        revision = workbench.save_edit(request, program, data)
     except workbench.Conflict as conflict:
         form.add_error(
             None,
@@ -177,9 +177,6 @@ def _save_and_act(request, program: Program, form: EditProgramForm) -> HttpRespo
             " nothing was overwritten. What differs is below; Save again to save yours over it.",
         )
         return _render_editor(request, program, form, status=409, conflict=conflict)
-    program.language = data["language"]
-    revision = program.save_source(data["source"], request.user)
-    workbench.forget_draft(request.user, program)
     if action == "run":
         return _start(request, program, request.POST.get("robot", ""))
     messages.success(request, f"Saved (revision {revision.number}).")

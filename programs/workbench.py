@@ -18,6 +18,7 @@ import difflib
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.core.exceptions import PermissionDenied
+from django.db import transaction
 from django.http import HttpRequest, HttpResponse, JsonResponse
 from django.shortcuts import redirect, render
 from django.utils import timezone
@@ -26,7 +27,7 @@ from django.views.decorators.http import require_GET, require_POST
 from programs import blocks
 from programs.access import EDIT, can, get_program_for_user
 from programs.forms import EditProgramForm, free_name
-from programs.models import Draft, Program
+from programs.models import Draft, Program, Revision
 from robots.models import get_robot_for_user
 from robots.runs import RunRefused, start_run
 from robots.views import robot_state_context
@@ -170,11 +171,19 @@ def _save(request: HttpRequest, program: Program) -> int:
     form = EditProgramForm(request.POST)
     if not form.is_valid():
         raise ValueError("; ".join(_errors(form)))
-    source = form.cleaned_data["source"]
-    check_base(program, request.POST.get("base_revision", ""), source)
-    program.language = form.cleaned_data["language"]
-    revision = program.save_source(source, request.user).number
-    forget_draft(request.user, program)
+    return save_edit(request, program, form.cleaned_data).number
+
+
+def save_edit(request: HttpRequest, program: Program, data: dict) -> Revision:
+    """The editor's text as a new revision (Conflict if another was saved since the one it
+    opened); the user's draft of it ends. One step for the workbench and the plain form."""
+    with transaction.atomic():
+        # Two saves at once: the second checks its base against the first's revision.
+        Program.objects.select_for_update().filter(pk=program.pk).first()
+        check_base(program, request.POST.get("base_revision", ""), data["source"])
+        program.language = data["language"]
+        revision = program.save_source(data["source"], request.user)
+        forget_draft(request.user, program)
     return revision
 
 

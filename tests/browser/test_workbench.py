@@ -318,3 +318,22 @@ def test_the_emergency_stop_beside_the_editor(bench, appliance):
         expect(console.locator("#run-status .state")).to_have_text("stopped")
     finally:
         appliance.resume()  # the shared appliance's robot, for the tests after this one
+
+
+def test_the_keyboard_leaves_the_editor_and_folds_the_robot_panel(bench, appliance):
+    page = bench
+    program = new_program(appliance, "Bench keys", "print(1)\n")
+    open_bench(page, program)
+    page.locator(".CodeMirror").click()
+    page.keyboard.press("Tab")  # in the editor, Tab indents
+    assert editor_text(page).endswith("    ")  # spaces at the cursor, focus stays
+    page.keyboard.press("Escape")
+    page.keyboard.press("Tab")  # Esc then Tab: out of the editor, to the robot's choice
+    assert page.evaluate("document.activeElement.id") == "bench-robot-choice"
+    toggle = page.get_by_role("button", name="Hide the robot")
+    toggle.focus()
+    page.keyboard.press("Enter")
+    expect(page.locator("#bench-panel #sensors")).to_be_hidden()
+    expect(page.locator("#panel-toggle")).to_have_attribute("aria-expanded", "false")
+    page.keyboard.press("Enter")
+    expect(page.locator("#bench-panel #sensors")).to_be_visible()

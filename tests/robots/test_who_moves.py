@@ -88,6 +88,11 @@ def test_who_may_press_its_emergency_stop(lab):
     client.force_login(users["sam"])
     page = client.get("/robots/arm/").content.decode()
     assert 'disabled title="Only its owner and staff may press it"' in page
+    # The workbench's button (htmx): told why in words, not an error page.
+    response = client.post("/robots/arm/estop", {"via": "workbench"}, HTTP_HX_REQUEST="true")
+    assert response.status_code == 403
+    assert response.content.decode() == "Only its owner and staff may press arm's emergency stop."
+    assert not RobotStop.objects.exists()
 
 
 def test_a_press_its_agent_misses_is_recorded_all_the_same(lab, settings):
