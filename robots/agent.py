@@ -455,7 +455,11 @@ class RobotAgent:
             language, self.isolation.home(), extra, clients_dir=self.isolation.clients()
         )
         # What runs: the source, or what its language compiles it to (a blocks program: Python)
-        filename, source = language.program_file(message["filename"], message["source"])
+        # Compiled (blocks) in a thread: a large program must not hold up the robot's loop;
+        # the others are their source, with no thread hop on every start.
+        filename, source = message["filename"], message["source"]
+        if language.compiler is not None:
+            filename, source = await asyncio.to_thread(language.program_file, filename, source)
         program = self.isolation.home() / filename
         argv = [*language.command(str(program)), *map(str, message.get("args", ()))]
         launch = Launch(
