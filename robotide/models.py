@@ -5,6 +5,7 @@ from datetime import timedelta
 from django.conf import settings
 from django.db import models
 from django.utils import timezone
+from django.utils.translation import gettext_lazy as _
 
 LAST_USED_RESOLUTION = timedelta(minutes=1)
 
@@ -17,12 +18,19 @@ class ApiToken(models.Model):
     """A bearer token for the REST API. Only its hash is stored; the token is shown once."""
 
     user = models.ForeignKey(
-        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="api_tokens"
+        settings.AUTH_USER_MODEL,
+        on_delete=models.CASCADE,
+        related_name="api_tokens",
+        verbose_name=_("user"),
     )
-    name = models.CharField(max_length=100, blank=True)
-    digest = models.CharField(max_length=64, unique=True, editable=False)
-    created = models.DateTimeField(default=timezone.now)
-    last_used = models.DateTimeField(null=True, blank=True)
+    name = models.CharField(_("name"), max_length=100, blank=True)
+    digest = models.CharField(_("digest"), max_length=64, unique=True, editable=False)
+    created = models.DateTimeField(_("created"), default=timezone.now)
+    last_used = models.DateTimeField(_("last used"), null=True, blank=True)
+
+    class Meta:
+        verbose_name = _("API token")
+        verbose_name_plural = _("API tokens")
 
     def __str__(self) -> str:
         return f"{self.user} {self.name or self.created:%Y-%m-%d}"
@@ -46,16 +54,23 @@ class ApiToken(models.Model):
 class ClassTeacher(models.Model):
     """A teacher of a class: a group whose members' programs and runs they see and run."""
 
-    group = models.ForeignKey("auth.Group", on_delete=models.CASCADE, related_name="teachers")
+    group = models.ForeignKey(
+        "auth.Group", on_delete=models.CASCADE, related_name="teachers", verbose_name=_("class")
+    )
     user = models.ForeignKey(
-        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="teaching"
+        settings.AUTH_USER_MODEL,
+        on_delete=models.CASCADE,
+        related_name="teaching",
+        verbose_name=_("teacher"),
     )
 
     class Meta:
+        verbose_name = _("class teacher")
+        verbose_name_plural = _("class teachers")
         constraints = [models.UniqueConstraint(fields=["group", "user"], name="one_teacher_row")]
 
     def __str__(self) -> str:
-        return f"{self.user} teaches {self.group}"
+        return _("%(user)s teaches %(group)s") % {"user": self.user, "group": self.group}
 
 
 class DirectoryAccount(models.Model):
@@ -66,12 +81,19 @@ class DirectoryAccount(models.Model):
     """
 
     user = models.OneToOneField(
-        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="directory_account"
+        settings.AUTH_USER_MODEL,
+        on_delete=models.CASCADE,
+        related_name="directory_account",
+        verbose_name=_("user"),
     )
-    dn = models.CharField("directory entry", max_length=500)
-    classes = models.JSONField(default=list, blank=True)
-    taught = models.JSONField(default=list, blank=True)
-    last_sign_in = models.DateTimeField(default=timezone.now)
+    dn = models.CharField(_("directory entry"), max_length=500)
+    classes = models.JSONField(_("classes"), default=list, blank=True)
+    taught = models.JSONField(_("classes taught"), default=list, blank=True)
+    last_sign_in = models.DateTimeField(_("last sign-in"), default=timezone.now)
+
+    class Meta:
+        verbose_name = _("directory account")
+        verbose_name_plural = _("directory accounts")
 
     def __str__(self) -> str:
         return self.dn
@@ -92,3 +114,23 @@ class DirectoryAccount(models.Model):
         ClassTeacher.objects.filter(user=user, group__name__in=set(self.taught) - taught).delete()
         self.classes, self.taught = sorted(member_of), sorted(taught)
         self.save()
+
+
+class LanguagePreference(models.Model):
+    """The language a user chose for the pages: it wins over their browser's Accept-Language."""
+
+    user = models.OneToOneField(
+        settings.AUTH_USER_MODEL,
+        on_delete=models.CASCADE,
+        related_name="language_preference",
+        verbose_name=_("user"),
+    )
+    # No choices: the list is settings.LANGUAGES, checked when it is set (robotide.language).
+    language = models.CharField(_("language"), max_length=15)
+
+    class Meta:
+        verbose_name = _("language preference")
+        verbose_name_plural = _("language preferences")
+
+    def __str__(self) -> str:
+        return f"{self.user}: {self.language}"

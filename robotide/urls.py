@@ -2,11 +2,12 @@ from django.contrib import admin
 from django.contrib.auth import views as auth_views
 from django.urls import include, path
 from django.views.generic import RedirectView
+from django.views.i18n import JavaScriptCatalog
 
 from programs import api_help, workbench
 from programs import views as programs
+from robotide import language, views_health
 from robotide import views_account as account
-from robotide import views_health
 from robotide.api import api
 from robotide.security import LoginForm
 from robots import gateway_views
@@ -114,6 +115,9 @@ urlpatterns = [
         auth_views.PasswordChangeDoneView.as_view(),
         name="password_change_done",
     ),
+    # The menu's language switcher, and the strings the scripts show (djangojs catalog).
+    path("i18n/setlang/", language.set_language, name="set_language"),
+    path("i18n/js/", JavaScriptCatalog.as_view(), name="javascript-catalog"),
     path("api/", api.urls),
     path("admin/", admin.site.urls),
 ]
