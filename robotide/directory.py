@@ -14,7 +14,7 @@ from django.utils import timezone
 from django_auth_ldap.backend import LDAPBackend
 from django_auth_ldap.config import LDAPSearch
 
-from robotide.security import clear_failures
+from robotide.security import ThrottledBackend
 
 
 def _group_names(ldap_user, search_filter: str) -> set[str]:
@@ -26,13 +26,7 @@ def _group_names(ldap_user, search_filter: str) -> set[str]:
     return {group_type.group_name_from_info(info) for info in found} - {None}
 
 
-class DirectoryBackend(LDAPBackend):
-    def authenticate(self, request, username=None, password=None, **kwargs):
-        user = super().authenticate(request, username=username, password=password, **kwargs)
-        if user is not None and request is not None:
-            clear_failures(request, username)  # as a right local password does
-        return user
-
+class DirectoryBackend(ThrottledBackend, LDAPBackend):
     def get_or_build_user(self, username, ldap_user):
         from robotide.models import DirectoryAccount
 

@@ -7,8 +7,8 @@
   session cookie would otherwise let any page, even a program's web server on another port of
   this host, read the user's live streams).
 - Login throttling: failed sign-ins are counted per (user name, address) pair and per address
-  in the cache; while either is locked, ``ThrottledModelBackend`` refuses every sign-in (a right
-  password too) and ``ThrottledLoginMixin`` tells the user how long to wait.
+  in the cache; while either is locked, ``ThrottledBackend`` refuses every sign-in (a right
+  password too, local or directory) and ``ThrottledLoginMixin`` tells the user how long to wait.
 """
 
 import hashlib
@@ -130,6 +130,20 @@ def _refusal(request, detail: str, status: int) -> HttpResponse:
 
 
 # -- Login throttling -----------------------------------------------------------------------------
+# Why not django-axes (issue 18; weighed against axes 8.3.1, its docs and its source):
+# - One limit for every lockout parameter set. AXES_FAILURE_LIMIT is "the integer number of login
+#   attempts allowed", or a callable of (request, credentials) that "returns an integer": it is not
+#   told which set it judges, and the handlers compare the largest count over
+#   AXES_LOCKOUT_PARAMETERS with that one number. [["username", "ip_address"], "ip_address"] at 5
+#   locks a whole lab after five typos among its students; at 50 it allows 50 guesses at one
+#   student's password.
+# - AXES_RESET_ON_SUCCESS ("a successful login will reset the number of failed logins") resets
+#   every parameter set: one's own sign-in from a shared address wipes that address's failures,
+#   the (victim, address) ones with them. Tried: 20 guesses at another student's password,
+#   signing in as oneself after every 4, were never locked. Ours forgives only the pair.
+# - One time for two: AXES_COOLOFF_TIME "defines a period of inactivity after which old failed
+#   login attempts will be cleared", so the counting window and the lock are one setting, counted
+#   from the latest failure (ours: failures within 15 minutes, then a 5-minute lock).
 
 
 def _address(request) -> str:
@@ -203,7 +217,13 @@ def _count_failed_login(sender, credentials, request=None, **kwargs):
         record_failure(request, username)
 
 
-class ThrottledModelBackend(ModelBackend):
+class ThrottledBackend:
+    """For an authentication backend class: refuses a locked sign-in, forgives on success.
+
+    Each password backend (local, directory) has it, so none depends on another's place in
+    AUTHENTICATION_BACKENDS to be throttled.
+    """
+
     def authenticate(self, request, username=None, password=None, **kwargs):
         if username is None:
             username = kwargs.get(get_user_model().USERNAME_FIELD)
@@ -213,6 +233,10 @@ class ThrottledModelBackend(ModelBackend):
         if user is not None and request is not None:
             clear_failures(request, username)
         return user
+
+
+class ThrottledModelBackend(ThrottledBackend, ModelBackend):
+    pass
 
 
 def throttled_message(seconds: int) -> str:

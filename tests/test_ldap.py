@@ -1,12 +1,6 @@
-"""Sign-in through an institution's directory: a real OpenLDAP slapd, started here on a free
-port with a directory of a student, a teacher and a staff member and their groups, and the
-settings robotide.settings builds from ROBOTIDE_LDAP_* for it."""
-
-import shutil
-import socket
-import subprocess
-import time
-from pathlib import Path
+"""Sign-in through an institution's directory: a real OpenLDAP slapd (tests/ldap_server.py),
+started on a free port with a directory of a student, a teacher and a staff member and their
+groups, and the settings robotide.settings builds from ROBOTIDE_LDAP_* for it."""
 
 import pytest
 from django.contrib.auth.models import Group, User
@@ -16,130 +10,22 @@ from django.test import Client
 from programs.models import Program
 from programs.signals import EXAMPLES
 from robotide.models import ClassTeacher, DirectoryAccount
-from tests.conftest import in_ci
-
-pytestmark = pytest.mark.django_db
-
-SLAPD = shutil.which("slapd") or "/usr/sbin/slapd"
-SCHEMAS = Path("/etc/ldap/schema")
-SUFFIX = "dc=uni,dc=test"
-ADMIN_DN, ADMIN_PASSWORD = f"cn=admin,{SUFFIX}", "directory-secret"
-PEOPLE, GROUPS = f"ou=people,{SUFFIX}", f"ou=groups,{SUFFIX}"
-
-
-def person(uid: str, given: str, surname: str, password: str) -> str:
-    return f"""dn: uid={uid},{PEOPLE}
-objectClass: inetOrgPerson
-uid: {uid}
-cn: {given} {surname}
-givenName: {given}
-sn: {surname}
-mail: {uid}@uni.test
-userPassword: {password}
-"""
-
-
-def group(cn: str, *members: str) -> str:
-    lines = "".join(f"member: uid={m},{PEOPLE}\n" for m in members)
-    return f"dn: cn={cn},{GROUPS}\nobjectClass: groupOfNames\ncn: {cn}\n{lines}"
-
-
-DIRECTORY = "\n".join(
-    [
-        f"dn: {SUFFIX}\nobjectClass: dcObject\nobjectClass: organization\ndc: uni\no: Uni\n",
-        f"dn: {PEOPLE}\nobjectClass: organizationalUnit\nou: people\n",
-        f"dn: {GROUPS}\nobjectClass: organizationalUnit\nou: groups\n",
-        person("stu", "Sam", "Student", "stu-pass-1"),
-        person("tea", "Tess", "Teacher", "tea-pass-1"),
-        person("sta", "Stan", "Staff", "sta-pass-1"),
-        group("class-robotics1", "stu", "tea"),
-        group("chess-club", "stu"),  # not a class
-        group("teachers", "tea"),
-        group("staff", "sta"),
-    ]
+from tests.ldap_server import (
+    PEOPLE,
+    add_entries,
+    as_directory_admin,
+    ldap_env,
+    person,
+    running_slapd,
 )
 
-SLAPD_CONF = """\
-include {schemas}/core.schema
-include {schemas}/cosine.schema
-include {schemas}/inetorgperson.schema
-include {schemas}/nis.schema
-modulepath /usr/lib/ldap
-moduleload back_mdb
-pidfile {dir}/slapd.pid
-database mdb
-maxsize 16777216
-suffix "{suffix}"
-rootdn "{rootdn}"
-rootpw {rootpw}
-directory {dir}/db
-access to attrs=userPassword by anonymous auth by * none
-access to * by * read
-"""
-
-
-def add_entries(conn, ldif: str) -> None:
-    import ldap.modlist
-
-    for entry in ldif.strip().split("\n\n"):
-        lines = [line.split(": ", 1) for line in entry.strip().splitlines()]
-        attrs: dict[str, list[bytes]] = {}
-        for name, value in lines[1:]:
-            attrs.setdefault(name, []).append(value.encode())
-        conn.add_s(lines[0][1], ldap.modlist.addModlist(attrs))
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _unavailable(why: str):
-    if in_ci():
-        pytest.fail(f"OpenLDAP's slapd is needed in CI: {why}")
-    pytest.skip(why)
+pytestmark = pytest.mark.django_db
 
 
 @pytest.fixture(scope="module")
 def slapd(tmp_path_factory):
-    """A running slapd: its URI. Unprivileged port, temporary config and database."""
-    if not Path(SLAPD).exists() or not (SCHEMAS / "inetorgperson.schema").exists():
-        _unavailable("slapd is not installed (Debian: slapd ldap-utils)")
-    import ldap
-
-    where = tmp_path_factory.mktemp("slapd")
-    (where / "db").mkdir()
-    conf = where / "slapd.conf"
-    conf.write_text(
-        SLAPD_CONF.format(
-            schemas=SCHEMAS, dir=where, suffix=SUFFIX, rootdn=ADMIN_DN, rootpw=ADMIN_PASSWORD
-        )
-    )
-    uri = f"ldap://127.0.0.1:{_free_port()}"
-    # -d keeps it in the foreground, our child, ended by the fixture.
-    log = open(where / "slapd.log", "w")  # noqa: SIM115
-    server = subprocess.Popen(
-        [SLAPD, "-f", str(conf), "-h", uri + "/", "-d", "0"], stdout=log, stderr=log
-    )
-    try:
-        deadline = time.monotonic() + 15
-        while True:
-            try:
-                conn = ldap.initialize(uri)
-                conn.simple_bind_s(ADMIN_DN, ADMIN_PASSWORD)
-                break
-            except ldap.LDAPError:
-                if server.poll() is not None or time.monotonic() > deadline:
-                    _unavailable(f"slapd did not start: {(where / 'slapd.log').read_text()}")
-                time.sleep(0.1)
-        add_entries(conn, DIRECTORY)
-        conn.unbind_s()
+    with running_slapd(tmp_path_factory.mktemp("slapd")) as uri:
         yield uri
-    finally:
-        server.terminate()
-        server.wait(10)
-        log.close()
 
 
 @pytest.fixture
@@ -147,17 +33,7 @@ def directory(slapd, settings, monkeypatch):
     """The settings robotide.settings makes of these ROBOTIDE_LDAP_* for the test's slapd."""
     from robotide.settings import ldap_settings
 
-    for name, value in {
-        "ROBOTIDE_LDAP_URI": slapd,
-        "ROBOTIDE_LDAP_BIND_DN": ADMIN_DN,
-        "ROBOTIDE_LDAP_BIND_PASSWORD": ADMIN_PASSWORD,
-        "ROBOTIDE_LDAP_USER_BASE": PEOPLE,
-        "ROBOTIDE_LDAP_USER_FILTER": "(uid=%(user)s)",
-        "ROBOTIDE_LDAP_GROUP_BASE": GROUPS,
-        "ROBOTIDE_LDAP_CLASS_FILTER": "(cn=class-*)",
-        "ROBOTIDE_LDAP_TEACHER_FILTER": "(cn=teachers)",
-        "ROBOTIDE_LDAP_STAFF_GROUP": f"cn=staff,{GROUPS}",
-    }.items():
+    for name, value in ldap_env(slapd).items():
         monkeypatch.setenv(name, value)
     for name, value in ldap_settings().items():
         setattr(settings, name, value)
@@ -237,20 +113,16 @@ def test_a_wrong_password_is_refused(directory):
 
 
 def test_a_student_removed_from_the_directory_can_no_longer_sign_in(directory):
-    import ldap
-
     client, _ = sign_in("stu", "stu-pass-1")
     assert signed_in_as(client) == "stu"
-    conn = ldap.initialize(directory)
-    conn.simple_bind_s(ADMIN_DN, ADMIN_PASSWORD)
-    conn.delete_s(f"uid=stu,{PEOPLE}")
-    try:
-        client, page = sign_in("stu", "stu-pass-1")
-        assert signed_in_as(client) is None
-        assert "enter a correct username and password" in page
-    finally:
-        add_entries(conn, person("stu", "Sam", "Student", "stu-pass-1"))
-        conn.unbind_s()
+    with as_directory_admin(directory) as conn:
+        conn.delete_s(f"uid=stu,{PEOPLE}")
+        try:
+            client, page = sign_in("stu", "stu-pass-1")
+            assert signed_in_as(client) is None
+            assert "enter a correct username and password" in page
+        finally:
+            add_entries(conn, person("stu", "Sam", "Student", "stu-pass-1"))
 
 
 def test_local_admin_still_signs_in(directory):
@@ -275,6 +147,32 @@ def test_sign_in_throttling_still_locks_out(directory, settings):
     client, page = sign_in("stu", "stu-pass-1")
     assert signed_in_as(client) is None
     assert "Too many failed sign-ins" in page
+
+
+def guess_five_times(username: str) -> None:
+    for attempt in range(5):
+        _, page = sign_in(username, f"guess {attempt}")
+        expected = "Too many failed sign-ins" if attempt == 4 else "enter a correct username"
+        assert expected in page, f"guess {attempt + 1}"
+
+
+def test_a_directory_password_guessed_5_times_locks_the_user_from_the_address(directory, settings):
+    # Guessing a student's directory password is the bigger risk: the same 5 as a local one.
+    settings.LOGIN_THROTTLE = {**settings.LOGIN_THROTTLE, "failures": 5}
+    guess_five_times("stu")
+    client, page = sign_in("stu", "stu-pass-1")  # the right directory password waits too
+    assert signed_in_as(client) is None and "Too many failed sign-ins" in page
+    client, _ = sign_in("tea", "tea-pass-1")  # others from this address are not locked
+    assert signed_in_as(client) == "tea"
+
+
+def test_the_directory_backend_is_throttled_on_its_own(directory, settings):
+    # Not only behind the local accounts' backend: a site may list the directory alone or first.
+    settings.AUTHENTICATION_BACKENDS = ["robotide.directory.DirectoryBackend"]
+    settings.LOGIN_THROTTLE = {**settings.LOGIN_THROTTLE, "failures": 5}
+    guess_five_times("stu")
+    client, page = sign_in("stu", "stu-pass-1")
+    assert signed_in_as(client) is None and "Too many failed sign-ins" in page
 
 
 def test_the_admin_shows_where_an_account_comes_from(directory):
