@@ -134,3 +134,35 @@ class LanguagePreference(models.Model):
 
     def __str__(self) -> str:
         return f"{self.user}: {self.language}"
+
+
+class ProviderAccount(models.Model):
+    """An account an OpenID Connect provider made and signs in (robotide.oidc).
+
+    It is the provider's identity (issuer, sub): never found by user name or e-mail, which the
+    provider's users may choose or share. Classes as a DirectoryAccount keeps them.
+    """
+
+    user = models.OneToOneField(
+        settings.AUTH_USER_MODEL,
+        on_delete=models.CASCADE,
+        related_name="provider_account",
+        verbose_name=_("user"),
+    )
+    issuer = models.CharField(_("provider"), max_length=500)
+    subject = models.CharField(_("subject (sub)"), max_length=255)
+    classes = models.JSONField(_("classes"), default=list, blank=True)
+    taught = models.JSONField(_("classes taught"), default=list, blank=True)
+    last_sign_in = models.DateTimeField(_("last sign-in"), default=timezone.now)
+
+    class Meta:
+        verbose_name = _("provider account")
+        verbose_name_plural = _("provider accounts")
+        constraints = [
+            models.UniqueConstraint(fields=["issuer", "subject"], name="one_account_per_identity")
+        ]
+
+    def __str__(self) -> str:
+        return f"{self.subject} @ {self.issuer}"
+
+    sync_classes = DirectoryAccount.sync_classes  # the same rules, from claims

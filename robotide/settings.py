@@ -9,6 +9,7 @@ import ipaddress
 import os
 import secrets
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import dj_database_url
 from django.core.exceptions import ImproperlyConfigured
@@ -323,6 +324,74 @@ if LDAP:
     globals().update(LDAP)
     # After the local accounts, whose backend also refuses a locked-out user name outright.
     AUTHENTICATION_BACKENDS = [*AUTHENTICATION_BACKENDS, "robotide.directory.DirectoryBackend"]
+
+
+def oidc_settings() -> dict:
+    """Sign-in with an OpenID Connect provider (robotide.oidc) from ROBOTIDE_OIDC_*; empty when
+    the discovery URL is unset. The provider is not asked here: its discovery document is read
+    on the first sign-in, so a provider that is down cannot stop the start."""
+    discovery = os.environ.get("ROBOTIDE_OIDC_DISCOVERY_URL", "")
+    if not discovery:
+        stray = sorted(n for n in os.environ if n.startswith("ROBOTIDE_OIDC_") and os.environ[n])
+        if stray:
+            raise ImproperlyConfigured(
+                f"{', '.join(stray)} set but not ROBOTIDE_OIDC_DISCOVERY_URL: set it (the "
+                "provider's .well-known/openid-configuration) or unset them"
+            )
+        return {}
+    if not os.environ.get("ROBOTIDE_OIDC_CLIENT_ID"):
+        raise ImproperlyConfigured(
+            "ROBOTIDE_OIDC_CLIENT_ID must be set when ROBOTIDE_OIDC_DISCOVERY_URL is"
+        )
+    well_known = "/.well-known/openid-configuration"
+    if not discovery.rstrip("/").endswith(well_known):
+        discovery = discovery.rstrip("/") + well_known  # the issuer's URL was given
+    claims = {"username": "preferred_username", "first_name": "given_name",
+              "last_name": "family_name", "email": "email"}  # fmt: skip
+    for pair in env_list("ROBOTIDE_OIDC_ATTRS", []):
+        field, _, claim = (part.strip() for part in pair.partition("="))
+        if field not in claims or not claim:
+            raise ImproperlyConfigured(
+                f"ROBOTIDE_OIDC_ATTRS: {pair!r} is not username=, first_name=, last_name= or "
+                "email=<claim>"
+            )
+        claims[field] = claim
+    for role in ("TEACHER", "STAFF"):
+        claim = os.environ.get(f"ROBOTIDE_OIDC_{role}_CLAIM", "")
+        if claim and not os.environ.get(f"ROBOTIDE_OIDC_{role}_VALUE"):
+            raise ImproperlyConfigured(
+                f"ROBOTIDE_OIDC_{role}_VALUE must be set when ROBOTIDE_OIDC_{role}_CLAIM is"
+            )
+    return {
+        "discovery_url": discovery,
+        "client_id": os.environ["ROBOTIDE_OIDC_CLIENT_ID"],
+        "client_secret": os.environ.get("ROBOTIDE_OIDC_CLIENT_SECRET", ""),  # none: PKCE alone
+        "name": os.environ.get("ROBOTIDE_OIDC_NAME") or "single sign-on",
+        "scopes": os.environ.get("ROBOTIDE_OIDC_SCOPES") or "openid email profile",
+        "claims": claims,
+        "classes_claim": os.environ.get("ROBOTIDE_OIDC_CLASSES_CLAIM", ""),
+        "class_pattern": os.environ.get("ROBOTIDE_OIDC_CLASS_PATTERN") or "*",
+        "teacher": (
+            os.environ.get("ROBOTIDE_OIDC_TEACHER_CLAIM", ""),
+            os.environ.get("ROBOTIDE_OIDC_TEACHER_VALUE", ""),
+        ),
+        "staff": (
+            os.environ.get("ROBOTIDE_OIDC_STAFF_CLAIM", ""),
+            os.environ.get("ROBOTIDE_OIDC_STAFF_VALUE", ""),
+        ),
+    }
+
+
+OIDC = oidc_settings()
+if OIDC:
+    # Called by robotide.oidc's callback alone (no password: the throttle has nothing to count).
+    AUTHENTICATION_BACKENDS = [*AUTHENTICATION_BACKENDS, "robotide.oidc.ProviderBackend"]
+    # Signing out posts a form that is redirected to the provider's end_session_endpoint, which
+    # form-action must allow (browsers check a form's redirects too).
+    _provider = urlsplit(OIDC["discovery_url"])
+    CONTENT_SECURITY_POLICY["DIRECTIVES"]["form-action"].append(
+        f"{_provider.scheme}://{_provider.netloc}"
+    )
 # The throttle's counters live in the cache: per process by default, shared through Redis in
 # fleet mode so every web worker sees the same failures.
 if REDIS_URL:

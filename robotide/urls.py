@@ -6,7 +6,7 @@ from django.views.i18n import JavaScriptCatalog
 
 from programs import api_help, workbench
 from programs import views as programs
-from robotide import language, views_health
+from robotide import language, oidc, views_health
 from robotide import views_account as account
 from robotide.api import api
 from robotide.security import LoginForm
@@ -104,7 +104,9 @@ urlpatterns = [
         account.token_revoke,
         name="account-token-revoke",
     ),
-    path("accounts/logout/", auth_views.LogoutView.as_view(), name="logout"),
+    path("accounts/logout/", oidc.SignOutView.as_view(), name="logout"),
+    path("accounts/oidc/login/", oidc.sign_in, name="oidc-login"),
+    path("accounts/oidc/callback/", oidc.callback, name="oidc-callback"),
     path(
         "accounts/password/",
         auth_views.PasswordChangeView.as_view(success_url="/accounts/password/done/"),
