@@ -14,6 +14,7 @@ Who sees what:
 from django.core.exceptions import PermissionDenied
 from django.db.models import Q, QuerySet
 from django.http import Http404
+from django.utils.translation import gettext as _
 
 from programs.models import Program, Run
 
@@ -63,10 +64,11 @@ def get_program_for_user(user, pk, level: str = READ) -> Program:
     try:
         program = programs_for_user(user).get(pk=pk)
     except (Program.DoesNotExist, ValueError, TypeError):
-        raise Http404("No such program.") from None
+        raise Http404(_("No such program.")) from None
     if level != READ and not can(user, level, program):
-        doing = "change" if level == EDIT else "delete or share"
-        raise PermissionDenied(f"You may read this program but not {doing} it.")
+        if level == EDIT:
+            raise PermissionDenied(_("You may read this program but not change it."))
+        raise PermissionDenied(_("You may read this program but not delete or share it."))
     return program
 
 
@@ -78,4 +80,4 @@ def get_run_for_user(user, pk) -> Run:
     try:
         return runs_for_user(user).get(pk=pk)
     except (Run.DoesNotExist, ValueError, TypeError):
-        raise Http404("No such run.") from None
+        raise Http404(_("No such run.")) from None

@@ -2,6 +2,8 @@ from django import forms
 from django.contrib import admin, messages
 from django.contrib.auth.models import Group
 from django.db.models import Count
+from django.utils.translation import gettext_lazy as _
+from django.utils.translation import ngettext
 
 from programs.models import Program, Revision, Run, Share
 from programs.shares import add_share
@@ -30,8 +32,12 @@ class ShareInline(admin.TabularInline):
 
 
 class ShareWithGroupForm(forms.Form):
-    group = forms.ModelChoiceField(Group.objects.order_by("name"), help_text="The class")
-    can_edit = forms.BooleanField(required=False, help_text="Its members may edit them too")
+    group = forms.ModelChoiceField(
+        Group.objects.order_by("name"), label=_("Group"), help_text=_("The class")
+    )
+    can_edit = forms.BooleanField(
+        required=False, label=_("Can edit"), help_text=_("Its members may edit them too")
+    )
 
 
 @admin.register(Program)
@@ -46,7 +52,7 @@ class ProgramAdmin(admin.ModelAdmin):
     def get_queryset(self, request):
         return super().get_queryset(request).annotate(_shares=Count("shares", distinct=True))
 
-    @admin.display(description="shares", ordering="_shares")
+    @admin.display(description=_("shares"), ordering="_shares")
     def shares_count(self, obj):
         return obj._shares
 
@@ -59,18 +65,29 @@ class ProgramAdmin(admin.ModelAdmin):
             gone.delete()
         formset.save_m2m()
 
-    @admin.action(description="Share with a group…")
+    @admin.action(description=_("Share with a group…"))
     def share_with_group(self, request, queryset):
         def apply(form, programs):
             group, can_edit = form.cleaned_data["group"], form.cleaned_data["can_edit"]
             for program in programs:
                 add_share(program, request.user, group=group.name, can_edit=can_edit)
-            rights = "may edit" if can_edit else "may read and run"
-            self.message_user(
-                request,
-                f"Shared {len(programs)} program(s) with {group.name}: its members {rights} them.",
-                messages.SUCCESS,
-            )
+            # English says "program(s)" for any count; other languages may say it per count.
+            if can_edit:
+                said = ngettext(
+                    "Shared %(count)s program(s) with %(group)s: its members may edit them.",
+                    "Shared %(count)s program(s) with %(group)s: its members may edit them.",
+                    len(programs),
+                )
+            else:
+                said = ngettext(
+                    "Shared %(count)s program(s) with %(group)s: its members may read and run"
+                    " them.",
+                    "Shared %(count)s program(s) with %(group)s: its members may read and run"
+                    " them.",
+                    len(programs),
+                )
+            said %= {"count": len(programs), "group": group.name}
+            self.message_user(request, said, messages.SUCCESS)
 
         return action_with_form(
             self,
@@ -79,10 +96,12 @@ class ProgramAdmin(admin.ModelAdmin):
             ShareWithGroupForm,
             apply,
             action="share_with_group",
-            title="Share programs with a group",
-            submit_label="Share",
-            explanation="The members of the class you choose will see these programs "
-            "(sharing again with the same class only changes whether they may edit).",
+            title=_("Share programs with a group"),
+            submit_label=_("Share"),
+            explanation=_(
+                "The members of the class you choose will see these programs "
+                "(sharing again with the same class only changes whether they may edit)."
+            ),
         )
 
 
@@ -138,7 +157,7 @@ class RunAdmin(admin.ModelAdmin):
     def has_add_permission(self, request):
         return False
 
-    @admin.action(description="Stop selected runs")
+    @admin.action(description=_("Stop selected runs"))
     def stop_runs(self, request, queryset):
         runs = [run for run in queryset.select_related("robot") if run.ongoing]
         asked = 0
@@ -146,9 +165,20 @@ class RunAdmin(admin.ModelAdmin):
             try:
                 request_stop(run)
             except AgentUnreachable as exc:
-                self.message_user(request, f"Run {run.pk}: {exc}", messages.ERROR)
+                self.message_user(
+                    request, _("Run %(id)s: %(why)s") % {"id": run.pk, "why": exc}, messages.ERROR
+                )
             else:
                 asked += 1
         skipped = queryset.count() - len(runs)
-        note = f" ({skipped} had already ended)" if skipped else ""
-        self.message_user(request, f"Asked {asked} run(s) to stop{note}.", messages.SUCCESS)
+        note = ""
+        if skipped:
+            note = ngettext(
+                " (%(count)s had already ended)", " (%(count)s had already ended)", skipped
+            ) % {"count": skipped}
+        said = ngettext(
+            "Asked %(count)s run(s) to stop%(note)s.",
+            "Asked %(count)s run(s) to stop%(note)s.",
+            asked,
+        ) % {"count": asked, "note": note}
+        self.message_user(request, said, messages.SUCCESS)

@@ -5,6 +5,7 @@ from django.db import IntegrityError
 from django.db.models import Count
 from django.http import HttpResponse, StreamingHttpResponse
 from django.utils.http import content_disposition_header
+from django.utils.translation import gettext as _
 from ninja import Field, File, Form, Router, Schema, UploadedFile
 from ninja.errors import HttpError
 from ninja.responses import Status
@@ -18,6 +19,7 @@ from programs.access import (
     get_run_for_user,
     programs_for_user,
 )
+from programs.forms import already_named
 from programs.languages import LANGUAGES, get_language
 from programs.models import MAX_SOURCE_BYTES, Program, Run
 from programs.runlog import plain_text
@@ -61,7 +63,7 @@ class ProgramIn(Body):
     @classmethod
     def not_too_large(cls, value):
         if value is not None and len(value.encode()) > MAX_SOURCE_BYTES:
-            raise ValueError(f"source larger than {MAX_SOURCE_BYTES // 1024} KB")
+            raise ValueError(_("source larger than %(kb)s KB") % {"kb": MAX_SOURCE_BYTES // 1024})
         return value
 
     @field_validator("name")
@@ -71,7 +73,7 @@ class ProgramIn(Body):
             return value
         value = value.strip()
         if not value:
-            raise ValueError("name must not be blank")
+            raise ValueError(_("name must not be blank"))
         return value
 
 
@@ -85,7 +87,7 @@ class ProgramUpdate(ProgramIn):
     def an_object(cls, value, handler):
         # Every field is optional: without this, a body of 0 or [] would be an empty update.
         if not isinstance(value, dict):
-            raise ValueError("the body must be a JSON object")
+            raise ValueError(_("the body must be a JSON object"))
         return handler(value)
 
 
@@ -162,7 +164,7 @@ def create_program(request, data: ProgramIn):
             owner=request.user, name=data.name, language=data.language, origin=data.origin
         )
     except IntegrityError:
-        return Status(409, {"detail": f"You already have a program named {data.name!r}."})
+        return Status(409, {"detail": already_named(data.name)})
     program.save_source(data.source, request.user)
     return Status(201, _program_out(program))
 
@@ -182,7 +184,7 @@ def update_program(request, program_id: int, data: ProgramUpdate):
     try:
         program.save_source(program.source if data.source is None else data.source, request.user)
     except IntegrityError:
-        return Status(409, {"detail": f"You already have a program named {data.name!r}."})
+        return Status(409, {"detail": already_named(data.name)})
     return Status(200, _program_out(program))
 
 
@@ -267,7 +269,7 @@ def import_programs(request, file: File[UploadedFile], replace: Form[bool] = Fal
 @programs_router.get("/languages", response=list[dict], auth=None)
 def list_languages(request):
     return [
-        {"name": lang.name, "label": lang.label, "extension": lang.extension,
+        {"name": lang.name, "label": str(lang.label), "extension": lang.extension,
          "available": lang.available, "install": lang.install_hint}
         for lang in LANGUAGES.values()
     ]  # fmt: skip

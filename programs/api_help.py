@@ -6,6 +6,7 @@ from django.contrib.auth.decorators import login_required
 from django.http import Http404, HttpRequest, HttpResponse, JsonResponse
 from django.shortcuts import render
 from django.urls import reverse
+from django.utils.translation import gettext as _
 
 from programs.robot_api_spec import CALLS, CLIENTS, by_language
 
@@ -14,7 +15,7 @@ from programs.robot_api_spec import CALLS, CLIENTS, by_language
 def robot_api_help(request: HttpRequest, language: str) -> JsonResponse:
     """One language's calls: signature, parameters with units, summary, doc, example."""
     if language not in CLIENTS:
-        raise Http404(f"no Robot API client for {language!r}")
+        raise Http404(_("no Robot API client for %(language)s") % {"language": repr(language)})
     help_ = by_language(language)
     page = reverse("robot-api-page")
     for call in help_["calls"]:

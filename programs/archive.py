@@ -37,6 +37,7 @@ from django.db import transaction
 from django.db.models import Count
 from django.utils import timezone
 from django.utils.text import slugify
+from django.utils.translation import gettext as _
 
 from programs.forms import MAX_NAME, free_name
 from programs.languages import LANGUAGES, language_for_filename
@@ -152,15 +153,36 @@ class ImportReport:
     def lines(self) -> list[str]:
         """For people: one line per file."""
         return [
-            *(f"created {e.program.name!r} from {e.file}" for e in self.created),
-            *(f"updated {e.program.name!r} from {e.file}" for e in self.updated),
-            *(f"skipped {s.file}: {s.why}" for s in self.skipped),
+            *(_created(e) for e in self.created),
+            *(_updated(e) for e in self.updated),
+            *(
+                _("skipped %(file)s: %(why)s") % {"file": s.file, "why": s.why}
+                for s in self.skipped
+            ),
         ]
 
     def summary(self) -> str:
-        return (
-            f"{len(self.created)} created, {len(self.updated)} updated, {len(self.skipped)} skipped"
-        )
+        counts = {"created": len(self.created), "updated": len(self.updated)}
+        counts["skipped"] = len(self.skipped)
+        return _("%(created)s created, %(updated)s updated, %(skipped)s skipped") % counts
+
+
+def _created(entry: Imported) -> str:
+    return _("created %(name)s from %(file)s") % {
+        "name": repr(entry.program.name),
+        "file": entry.file,
+    }
+
+
+def _updated(entry: Imported) -> str:
+    return _("updated %(name)s from %(file)s") % {
+        "name": repr(entry.program.name),
+        "file": entry.file,
+    }
+
+
+def _mb(limit: int) -> dict:
+    return {"mb": limit // 2**20}
 
 
 def import_zip(data: bytes, user, *, filename: str = "a zip", replace: bool = False):
@@ -170,13 +192,13 @@ def import_zip(data: bytes, user, *, filename: str = "a zip", replace: bool = Fa
     program gets the file as a new revision (its history stays). Raises ArchiveError.
     """
     if len(data) > MAX_TOTAL_BYTES:
-        raise ArchiveTooLarge(f"The zip is larger than {MAX_TOTAL_BYTES // 2**20} MB.")
+        raise ArchiveTooLarge(_("The zip is larger than %(mb)s MB.") % _mb(MAX_TOTAL_BYTES))
     try:
         zf = zipfile.ZipFile(io.BytesIO(data))
     except (zipfile.BadZipFile, ValueError, EOFError) as exc:
-        raise NotAZip(f"Not a zip file ({exc}).") from None
+        raise NotAZip(_("Not a zip file (%(why)s).") % {"why": exc}) from None
     except NotImplementedError as exc:
-        raise NotAZip(f"A zip this robotide cannot read ({exc}).") from None
+        raise NotAZip(_("A zip this robotide cannot read (%(why)s).") % {"why": exc}) from None
     basename = PurePosixPath(filename.replace("\\", "/")).name
     origin = f"imported from {basename}"[:MAX_ORIGIN]
     report = ImportReport()
@@ -193,13 +215,15 @@ def import_zip(data: bytes, user, *, filename: str = "a zip", replace: bool = Fa
             wanted = _program_name(name, entry)
             program, done = _save(user, wanted, language, source, origin, replace)
             if done == "unchanged":
-                report.skipped.append(Skipped(name, f"the same as {program.name!r} already"))
+                report.skipped.append(
+                    Skipped(name, _("the same as %(name)s already") % {"name": repr(program.name)})
+                )
             else:
                 getattr(report, done).append(Imported(name, program))
     for name in twice:
-        report.skipped.append(Skipped(name, "in the zip twice: the first one counts"))
+        report.skipped.append(Skipped(name, _("in the zip twice: the first one counts")))
     for name in manifest:
-        report.skipped.append(Skipped(name, "listed in the manifest but not in the zip"))
+        report.skipped.append(Skipped(name, _("listed in the manifest but not in the zip")))
     return report
 
 
@@ -207,31 +231,32 @@ def _files(zf: zipfile.ZipFile) -> tuple[dict[str, zipfile.ZipInfo], list[str]]:
     """The zip's files by the name the manifest knows them by, after the safety checks."""
     infos = zf.infolist()
     if len(infos) > MAX_FILES:
-        raise ArchiveTooLarge(f"The zip holds more than {MAX_FILES} files.")
+        raise ArchiveTooLarge(_("The zip holds more than %(n)s files.") % {"n": MAX_FILES})
     if sum(info.file_size for info in infos) > MAX_TOTAL_BYTES:
         raise ArchiveTooLarge(
-            f"The zip's files come to more than {MAX_TOTAL_BYTES // 2**20} MB uncompressed."
+            _("The zip's files come to more than %(mb)s MB uncompressed.") % _mb(MAX_TOTAL_BYTES)
         )
     entries = []
     for info in infos:
         path = info.filename.replace("\\", "/")
         if path.startswith("/") or re.match(r"[A-Za-z]:(/|$)", path):
-            raise BadArchive(f"{info.filename!r} in the zip is an absolute path.")
+            raise BadArchive(_("%(file)s in the zip is an absolute path.") % _file(info))
         if ".." in path.split("/"):
-            raise BadArchive(f"{info.filename!r} in the zip climbs out of it ('..').")
+            raise BadArchive(_("%(file)s in the zip climbs out of it ('..').") % _file(info))
         parts = PurePosixPath(path).parts
         if parts and not path.startswith(IGNORED_FOLDERS) and not info.is_dir():
             entries.append((parts, info))
     # Zipping a folder puts every file in it: look through that one folder.
-    tops = {parts[0] for parts, _ in entries}
-    if len(tops) == 1 and all(len(parts) > 1 for parts, _ in entries):
+    tops = {parts[0] for parts, _info in entries}
+    if len(tops) == 1 and all(len(parts) > 1 for parts, _info in entries):
         entries = [(parts[1:], info) for parts, info in entries]
     files: dict[str, zipfile.ZipInfo] = {}
     twice = []
     for parts, info in entries:
         if len(parts) > 1:
             raise BadArchive(
-                f"{info.filename!r} is in a folder: put the program files at the top of the zip."
+                _("%(file)s is in a folder: put the program files at the top of the zip.")
+                % _file(info)
             )
         if parts[0] in files:
             twice.append(parts[0])
@@ -240,27 +265,36 @@ def _files(zf: zipfile.ZipFile) -> tuple[dict[str, zipfile.ZipInfo], list[str]]:
     return files, twice
 
 
+def _file(info: zipfile.ZipInfo) -> dict:
+    return {"file": repr(info.filename)}
+
+
 def _manifest(zf: zipfile.ZipFile, info: zipfile.ZipInfo | None) -> dict[str, dict]:
     """The manifest's entries by file name ({} without a manifest)."""
     if info is None:
         return {}
     try:
         if info.file_size > MAX_MANIFEST_BYTES:
-            raise ValueError(f"larger than {MAX_MANIFEST_BYTES // 1024} KB")
+            raise ValueError(_("larger than %(kb)s KB") % {"kb": MAX_MANIFEST_BYTES // 1024})
         manifest = json.loads(_read(zf, info, MAX_MANIFEST_BYTES).decode("utf-8-sig"))
         if not isinstance(manifest, dict) or manifest.get("format", FORMAT) != FORMAT:
-            raise ValueError("not a robotide manifest")
+            raise ValueError(_("not a robotide manifest"))
         version = manifest.get("version", VERSION)
         if not isinstance(version, int) or version > VERSION:
-            raise ValueError(f"format version {version!r}: made by a newer robotide?")
+            raise ValueError(
+                _("format version %(version)s: made by a newer robotide?")
+                % {"version": repr(version)}
+            )
         entries = manifest.get("programs", [])
         if not isinstance(entries, list) or not all(
             isinstance(e, dict) and isinstance(e.get("file"), str) for e in entries
         ):
-            raise ValueError('"programs" must be a list of objects, each with its "file"')
+            raise ValueError(_('"programs" must be a list of objects, each with its "file"'))
     # JSONDecodeError is a ValueError; deep nesting is a RecursionError
     except (ValueError, RecursionError, NotImplementedError) as exc:
-        raise BadArchive(f"The zip's {MANIFEST} is unusable: {exc}.") from None
+        raise BadArchive(
+            _("The zip's %(manifest)s is unusable: %(why)s.") % {"manifest": MANIFEST, "why": exc}
+        ) from None
     return {entry["file"]: entry for entry in entries}
 
 
@@ -288,9 +322,9 @@ def _read(zf: zipfile.ZipFile, info: zipfile.ZipInfo, limit: int) -> bytes:
     # A header that lies sends zipfile seeking before the start (ValueError) or decoding a
     # name that is not UTF-8 (UnicodeDecodeError, a ValueError too).
     except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError) as exc:
-        raise NotAZip(f"The zip is damaged ({exc}).") from None
+        raise NotAZip(_("The zip is damaged (%(why)s).") % {"why": exc}) from None
     except RuntimeError as exc:  # encrypted
-        raise NotAZip(f"A zip this robotide cannot read ({exc}).") from None
+        raise NotAZip(_("A zip this robotide cannot read (%(why)s).") % {"why": exc}) from None
 
 
 class _Skip(Exception):
@@ -304,28 +338,32 @@ def _read_program(zf: zipfile.ZipFile, name: str, info: zipfile.ZipInfo, entry: 
     language = declared if declared in LANGUAGES else getattr(placed, "name", None)
     if language is None:
         if declared:
-            raise _Skip(f"unknown language {declared!r}")
+            raise _Skip(_("unknown language %(name)s") % {"name": repr(declared)})
         suffix = PurePosixPath(name).suffix
-        raise _Skip(f"no language has the extension {suffix!r}" if suffix else "no extension")
+        if not suffix:
+            raise _Skip(_("no extension"))
+        raise _Skip(_("no language has the extension %(ext)s") % {"ext": repr(suffix)})
     if stat.S_ISLNK(info.external_attr >> 16):
-        raise _Skip("a symbolic link, not a file")
+        raise _Skip(_("a symbolic link, not a file"))
     if info.flag_bits & 0x1:
-        raise _Skip("encrypted")
-    too_large = _Skip(f"larger than {MAX_SOURCE_BYTES // 1024} KB, the most a program may be")
+        raise _Skip(_("encrypted"))
+    too_large = _Skip(
+        _("larger than %(kb)s KB, the most a program may be") % {"kb": MAX_SOURCE_BYTES // 1024}
+    )
     if info.file_size > MAX_SOURCE_BYTES:
         raise too_large
     try:
         raw = _read(zf, info, MAX_SOURCE_BYTES + 1)
     except NotImplementedError:
-        raise _Skip("compressed in a way this robotide cannot read") from None
+        raise _Skip(_("compressed in a way this robotide cannot read")) from None
     if len(raw) > MAX_SOURCE_BYTES:  # zipfile stops at the stated size: belt and braces
         raise too_large
     try:
         source = raw.decode("utf-8-sig")  # a text editor may have put a byte-order mark
     except UnicodeDecodeError:
-        raise _Skip("not UTF-8 text") from None
+        raise _Skip(_("not UTF-8 text")) from None
     if "\x00" in source:
-        raise _Skip("not text (it has NUL bytes)")
+        raise _Skip(_("not text (it has NUL bytes)"))
     return language, source.replace("\r\n", "\n")
 
 

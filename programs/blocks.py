@@ -28,6 +28,8 @@ import math
 import re
 import unicodedata
 
+from django.utils.translation import gettext as _
+
 __all__ = ["BlocksError", "block_types", "to_python", "to_runnable_python"]
 
 
@@ -109,18 +111,22 @@ def to_python(source_json: str) -> str:
     try:
         workspace = json.loads(source_json)
     except ValueError as exc:  # also a number of more digits than Python reads
-        raise BlocksError(f"This blocks program is not valid JSON ({exc}).") from None
+        raise BlocksError(
+            _("This blocks program is not valid JSON (%(why)s).") % {"why": exc}
+        ) from None
     except RecursionError:
-        raise BlocksError("This blocks program is nested too deeply.") from None
+        raise BlocksError(_("This blocks program is nested too deeply.")) from None
     try:
         code = _Generator(workspace).program()
     except RecursionError:
-        raise BlocksError("This blocks program is nested too deeply.") from None
+        raise BlocksError(_("This blocks program is nested too deeply.")) from None
     try:
         compile(code, "<blocks>", "exec")
     except (SyntaxError, RecursionError, MemoryError) as exc:
         # Python's own limits, e.g. more than 20 loops inside each other.
-        raise BlocksError(f"This blocks program cannot run as Python: {exc}.") from None
+        raise BlocksError(
+            _("This blocks program cannot run as Python: %(why)s.") % {"why": exc}
+        ) from None
     return code
 
 
@@ -143,14 +149,16 @@ def block_types() -> set[str]:
 def _name_of(block: dict) -> str:
     """How an error names a block: its type and id."""
     block_id = block.get("id")
-    where = f" (id {str(block_id)[:40]!r})" if block_id is not None else ""
-    return f"block {str(block.get('type'))[:60]!r}{where}"
+    kind = repr(str(block.get("type"))[:60])
+    if block_id is None:
+        return _("block %(type)s") % {"type": kind}
+    return _("block %(type)s (id %(id)s)") % {"type": kind, "id": repr(str(block_id)[:40])}
 
 
 class _Generator:
     def __init__(self, workspace):
         if not isinstance(workspace, dict):
-            raise BlocksError("A blocks program is a JSON object with 'blocks' and 'variables'.")
+            raise BlocksError(_("A blocks program is a JSON object with 'blocks' and 'variables'."))
         self.workspace = workspace
         self.used: set[str] = set(RESERVED)
         self.variables: dict[str, str] = {}  # variable id -> identifier
@@ -206,15 +214,15 @@ class _Generator:
     def program(self) -> str:
         for variable in self._list(self.workspace, "variables", "the workspace"):
             if not isinstance(variable, dict) or not isinstance(variable.get("name"), str):
-                raise BlocksError("Each of the workspace's variables needs a name.")
+                raise BlocksError(_("Each of the workspace's variables needs a name."))
             self._variable(variable.get("id"), variable["name"])
         blocks = self.workspace.get("blocks", {})
         if not isinstance(blocks, dict):
-            raise BlocksError("The workspace's 'blocks' must be an object with a 'blocks' list.")
+            raise BlocksError(_("The workspace's 'blocks' must be an object with a 'blocks' list."))
         body: list[str] = []
         for block in _in_reading_order(self._list(blocks, "blocks", "the workspace")):
             if not isinstance(block, dict):
-                raise BlocksError("Each of the workspace's top blocks must be an object.")
+                raise BlocksError(_("Each of the workspace's top blocks must be an object."))
             body += self._sequence(block)
 
         lines = [HEADER, "import robot, time"]
@@ -250,7 +258,9 @@ class _Generator:
             return self.statement[kind](block)
         if kind in self.value:  # a value on its own: Blockly runs it, and so do we
             return [self.value[kind](block)[0]]
-        raise BlocksError(f"Unknown {_name_of(block)}: robotide cannot run it.")
+        raise BlocksError(
+            _("Unknown %(block)s: robotide cannot run it.") % {"block": _name_of(block)}
+        )
 
     def _body(self, block: dict, name: str, loop: bool = False) -> list[str]:
         """The indented lines of a statement input (`pass` if it holds nothing)."""
@@ -272,8 +282,13 @@ class _Generator:
         kind = inner["type"]
         if kind not in self.value:
             if kind in self.statement:
-                raise BlocksError(f"{_name_of(inner)} is not a value: it cannot go in {name}.")
-            raise BlocksError(f"Unknown {_name_of(inner)}: robotide cannot run it.")
+                raise BlocksError(
+                    _("%(block)s is not a value: it cannot go in %(name)s.")
+                    % {"block": _name_of(inner), "name": name}
+                )
+            raise BlocksError(
+                _("Unknown %(block)s: robotide cannot run it.") % {"block": _name_of(inner)}
+            )
         code, inner_order = self.value[kind](inner)
         if _needs_parentheses(order, inner_order, same):
             return f"({code})"
@@ -282,7 +297,9 @@ class _Generator:
     def _input(self, block: dict, name: str) -> dict | None:
         inputs = block.get("inputs", {})
         if not isinstance(inputs, dict):
-            raise BlocksError(f"{_name_of(block)}: its 'inputs' must be an object.")
+            raise BlocksError(
+                _("%(block)s: its 'inputs' must be an object.") % {"block": _name_of(block)}
+            )
         return self._connected(inputs.get(name), block, name)
 
     def _connected(self, connection, block: dict, name: str) -> dict | None:
@@ -290,47 +307,70 @@ class _Generator:
         if connection is None:
             return None
         if not isinstance(connection, dict):
-            raise BlocksError(f"{_name_of(block)}: its {name} must be an object.")
+            raise BlocksError(
+                _("%(block)s: its %(name)s must be an object.")
+                % {"block": _name_of(block), "name": name}
+            )
         inner = connection.get("block") or connection.get("shadow")
         if inner is not None and not isinstance(inner, dict):
-            raise BlocksError(f"{_name_of(block)}: the block in its {name} must be an object.")
+            raise BlocksError(
+                _("%(block)s: the block in its %(name)s must be an object.")
+                % {"block": _name_of(block), "name": name}
+            )
         return inner
 
     def _check(self, block) -> None:
         if not isinstance(block, dict) or not isinstance(block.get("type"), str):
-            raise BlocksError("Every block must be an object with a 'type'.")
+            raise BlocksError(_("Every block must be an object with a 'type'."))
         self.blocks += 1
         if self.blocks > MAX_BLOCKS:
-            raise BlocksError(f"This blocks program has more than {MAX_BLOCKS} blocks.")
+            raise BlocksError(
+                _("This blocks program has more than %(count)s blocks.") % {"count": MAX_BLOCKS}
+            )
 
     def _field(self, block: dict, name: str, default=None):
         fields = block.get("fields", {})
         if not isinstance(fields, dict):
-            raise BlocksError(f"{_name_of(block)}: its 'fields' must be an object.")
+            raise BlocksError(
+                _("%(block)s: its 'fields' must be an object.") % {"block": _name_of(block)}
+            )
         value = fields.get(name, default)
         if value is None:
-            raise BlocksError(f"{_name_of(block)} has no {name} field.")
+            raise BlocksError(
+                _("%(block)s has no %(name)s field.") % {"block": _name_of(block), "name": name}
+            )
         return value
 
     def _choice(self, block: dict, name: str, table: dict):
         value = self._field(block, name)
         if not isinstance(value, str) or value not in table:
             raise BlocksError(
-                f"{_name_of(block)}: {name} must be one of {', '.join(table)}, not {value!r:.40}."
+                _("%(block)s: %(name)s must be one of %(choices)s, not %(value)s.")
+                % {
+                    "block": _name_of(block),
+                    "name": name,
+                    "choices": ", ".join(table),
+                    "value": repr(value)[:40],
+                }
             )
         return table[value]
 
     def _text_field(self, block: dict, name: str) -> str:
         value = self._field(block, name, "")
         if not isinstance(value, str | int | float) or isinstance(value, bool):
-            raise BlocksError(f"{_name_of(block)}: its {name} must be a text.")
+            raise BlocksError(
+                _("%(block)s: its %(name)s must be a text.")
+                % {"block": _name_of(block), "name": name}
+            )
         return str(value)
 
     @staticmethod
     def _list(container: dict, key: str, what: str) -> list:
         value = container.get(key, [])
         if not isinstance(value, list):
-            raise BlocksError(f"The '{key}' of {what} must be a list.")
+            raise BlocksError(
+                _("The '%(key)s' of %(what)s must be a list.") % {"key": key, "what": what}
+            )
         return value
 
     # -- variables -------------------------------------------------------------------------
@@ -360,10 +400,16 @@ class _Generator:
                 return self.variables[str(field["id"])]
             if isinstance(field.get("name"), str):
                 return self._variable(field.get("id"), field["name"])
-            raise BlocksError(f"{_name_of(block)} uses a variable the workspace does not have.")
+            raise BlocksError(
+                _("%(block)s uses a variable the workspace does not have.")
+                % {"block": _name_of(block)}
+            )
         if isinstance(field, str):  # older saves: the variable's name
             return self._variable(None, field)
-        raise BlocksError(f"{_name_of(block)}: its {name} must name a variable.")
+        raise BlocksError(
+            _("%(block)s: its %(name)s must name a variable.")
+            % {"block": _name_of(block), "name": name}
+        )
 
     def _counter(self) -> str:
         """The counter of a repeat block: count, and count2 for one inside it, ..."""
@@ -381,12 +427,19 @@ class _Generator:
     def _if(self, block: dict) -> list[str]:
         state = block.get("extraState") or {}
         if not isinstance(state, dict):
-            raise BlocksError(f"{_name_of(block)}: its extraState must be an object.")
+            raise BlocksError(
+                _("%(block)s: its extraState must be an object.") % {"block": _name_of(block)}
+            )
         else_ifs = state.get("elseIfCount", 0)
         if not isinstance(else_ifs, int) or isinstance(else_ifs, bool):
-            raise BlocksError(f"{_name_of(block)}: elseIfCount must be a whole number.")
+            raise BlocksError(
+                _("%(block)s: elseIfCount must be a whole number.") % {"block": _name_of(block)}
+            )
         if not 0 <= else_ifs <= MAX_ELSE_IFS:
-            raise BlocksError(f"{_name_of(block)}: elseIfCount must be 0 to {MAX_ELSE_IFS}.")
+            raise BlocksError(
+                _("%(block)s: elseIfCount must be 0 to %(count)s.")
+                % {"block": _name_of(block), "count": MAX_ELSE_IFS}
+            )
         lines: list[str] = []
         for n in range(else_ifs + 1):
             condition = self._code(block, f"IF{n}", NONE, "False")
@@ -440,7 +493,10 @@ class _Generator:
     def _flow(self, block: dict) -> list[str]:
         word = self._choice(block, "FLOW", {"BREAK": "break", "CONTINUE": "continue"})
         if not self.loops:
-            raise BlocksError(f"{_name_of(block)}: '{word}' works only inside a loop.")
+            raise BlocksError(
+                _("%(block)s: '%(word)s' works only inside a loop.")
+                % {"block": _name_of(block), "word": word}
+            )
         return [word]
 
     def _compare(self, block: dict):
@@ -498,7 +554,10 @@ class _Generator:
         state = block.get("extraState") or {}
         count = state.get("itemCount", 2) if isinstance(state, dict) else None
         if not isinstance(count, int) or isinstance(count, bool) or not 0 <= count <= 1000:
-            raise BlocksError(f"{_name_of(block)}: itemCount must be a whole number to 1000.")
+            raise BlocksError(
+                _("%(block)s: itemCount must be a whole number to 1000.")
+                % {"block": _name_of(block)}
+            )
         parts = [self._as_text(block, f"ADD{n}", ADDITIVE) for n in range(count)]
         if not parts:
             return EMPTY_TEXT, ATOMIC
@@ -553,7 +612,10 @@ class _Generator:
     def _sensor(self, block: dict):
         name = self._text_field(block, "SENSOR")
         if not SENSOR_NAME.fullmatch(name):
-            raise BlocksError(f"{_name_of(block)}: {name[:40]!r} is not a sensor's name.")
+            raise BlocksError(
+                _("%(block)s: %(name)s is not a sensor's name.")
+                % {"block": _name_of(block), "name": repr(name[:40])}
+            )
         reading, *parts = name.split(".")
         return f"bot.sensor({reading!r})" + "".join(f"[{part!r}]" for part in parts), MEMBER
 
@@ -613,18 +675,26 @@ def _needs_parentheses(outer: float, inner: float, same: bool) -> bool:
 def _number_literal(block: dict, value) -> tuple[str, float]:
     """A number field's value written anew as Python, and its order (a minus is unary)."""
     if isinstance(value, bool) or not isinstance(value, int | float | str):
-        raise BlocksError(f"{_name_of(block)}: {value!r:.40} is not a number.")
+        raise BlocksError(
+            _("%(block)s: %(value)s is not a number.")
+            % {"block": _name_of(block), "value": repr(value)[:40]}
+        )
     if isinstance(value, int):
         if abs(value) > MAX_INTEGER:
-            raise BlocksError(f"{_name_of(block)}: the number is too large.")
+            raise BlocksError(_("%(block)s: the number is too large.") % {"block": _name_of(block)})
         code = str(value)
     else:
         try:
             number = float(value)
         except ValueError:
-            raise BlocksError(f"{_name_of(block)}: {value!r:.40} is not a number.") from None
+            raise BlocksError(
+                _("%(block)s: %(value)s is not a number.")
+                % {"block": _name_of(block), "value": repr(value)[:40]}
+            ) from None
         if math.isnan(number):
-            raise BlocksError(f"{_name_of(block)}: NaN is not a number a program can use.")
+            raise BlocksError(
+                _("%(block)s: NaN is not a number a program can use.") % {"block": _name_of(block)}
+            )
         if math.isinf(number):  # Blockly's number fields allow Infinity
             return ("math.inf", MEMBER) if number > 0 else ("-math.inf", UNARY)
         code = str(int(number)) if number.is_integer() and abs(number) < 2**53 else repr(number)

@@ -9,6 +9,7 @@ from channels.generic.websocket import AsyncWebsocketConsumer
 from django.http import Http404
 from django.template.loader import render_to_string
 from django.utils.html import escape
+from django.utils.translation import ngettext
 
 from programs.access import get_program_for_user, get_run_for_user
 from programs.runlog import count_lines_between, lines_after, places_in, render_lines, tail
@@ -28,7 +29,11 @@ def _get_run(user, run_id):
 
 
 def skipped_line(count: int) -> str:
-    text = f"… {count} line(s) not shown live: the full log has them (Download log)"
+    text = ngettext(
+        "… %(count)s line(s) not shown live: the full log has them (Download log)",
+        "… %(count)s line(s) not shown live: the full log has them (Download log)",
+        count,
+    ) % {"count": count}
     return f'<div class="ln s">{escape(text)}</div>'
 
 

@@ -1,4 +1,6 @@
 from django import forms
+from django.utils.translation import gettext
+from django.utils.translation import gettext_lazy as _
 
 from programs.languages import language_for_filename, language_options
 from programs.models import MAX_SOURCE_BYTES, Program
@@ -7,8 +9,8 @@ MAX_NAME = Program._meta.get_field("name").max_length
 
 
 class NewProgramForm(forms.Form):
-    name = forms.CharField(max_length=100)
-    language = forms.ChoiceField(choices=language_options)
+    name = forms.CharField(label=_("Name"), max_length=100)
+    language = forms.ChoiceField(label=_("Language"), choices=language_options)
 
     def __init__(self, *args, owner=None, **kwargs):
         super().__init__(*args, **kwargs)
@@ -19,22 +21,24 @@ class NewProgramForm(forms.Form):
 
 
 class EditProgramForm(forms.Form):
-    source = forms.CharField(required=False, widget=forms.Textarea, strip=False)
-    language = forms.ChoiceField(choices=language_options)
-    save_as = forms.CharField(max_length=100, required=False, label="Save as")
+    source = forms.CharField(label=_("Source"), required=False, widget=forms.Textarea, strip=False)
+    language = forms.ChoiceField(label=_("Language"), choices=language_options)
+    save_as = forms.CharField(max_length=100, required=False, label=_("Save as"))
 
     def clean_source(self):
         # Browsers send CRLF from textareas; programs keep Unix line ends.
         source = self.cleaned_data["source"].replace("\r\n", "\n")
         if len(source.encode()) > MAX_SOURCE_BYTES:
-            raise forms.ValidationError(f"Programs are limited to {MAX_SOURCE_BYTES // 1024} KB.")
+            raise forms.ValidationError(too_large())
         return source
 
 
 class UploadForm(forms.Form):
-    file = forms.FileField()
+    file = forms.FileField(label=_("File"))
     language = forms.ChoiceField(
-        choices=[("", "from the file name"), *language_options()], required=False
+        label=_("Language"),
+        choices=[("", _("from the file name")), *language_options()],
+        required=False,
     )
 
     def __init__(self, *args, owner=None, **kwargs):
@@ -47,16 +51,18 @@ class UploadForm(forms.Form):
         if upload is None:
             return cleaned
         if upload.size > MAX_SOURCE_BYTES:
-            raise forms.ValidationError(f"Programs are limited to {MAX_SOURCE_BYTES // 1024} KB.")
+            raise forms.ValidationError(too_large())
         language = cleaned.get("language") or getattr(
             language_for_filename(upload.name), "name", ""
         )
         if not language:
-            raise forms.ValidationError("Choose a language: the file name does not tell it.")
+            raise forms.ValidationError(
+                gettext("Choose a language: the file name does not tell it.")
+            )
         try:
             source = upload.read().decode("utf-8")
         except UnicodeDecodeError:
-            raise forms.ValidationError("The file is not UTF-8 text.") from None
+            raise forms.ValidationError(gettext("The file is not UTF-8 text.")) from None
         stem = upload.name.rsplit("/", 1)[-1].rsplit(".", 1)[0][:100] or "uploaded"
         cleaned.update(language=language, source=source.replace("\r\n", "\n"))
         cleaned["name"] = free_name(self.owner, stem)
@@ -66,8 +72,16 @@ class UploadForm(forms.Form):
 def unique_name(owner, name: str) -> str:
     name = name.strip()
     if Program.objects.filter(owner=owner, name=name).exists():
-        raise forms.ValidationError(f"You already have a program named {name!r}.")
+        raise forms.ValidationError(already_named(name))
     return name
+
+
+def already_named(name: str) -> str:
+    return gettext("You already have a program named %(name)s.") % {"name": repr(name)}
+
+
+def too_large() -> str:
+    return gettext("Programs are limited to %(kb)s KB.") % {"kb": MAX_SOURCE_BYTES // 1024}
 
 
 def free_name(owner, name: str) -> str:

@@ -16,6 +16,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from django.utils.translation import gettext
+from django.utils.translation import gettext_lazy as _
+
 from programs import blocks
 from runbox import SYSTEM_PATH
 
@@ -25,7 +28,7 @@ CLIENTS_DIR = Path(__file__).resolve().parent / "clients"
 @dataclass(frozen=True)
 class Language:
     name: str
-    label: str
+    label: str  # for people: translated where shown
     extension: str
     interpreter: tuple[str, ...]  # candidates, first found wins
     args: tuple[str, ...] = ()
@@ -188,7 +191,7 @@ LANGUAGES: dict[str, Language] = {
         ),
         Language(
             name="blocks",
-            label="Blocks",
+            label=_("Blocks"),
             extension=".json",
             interpreter=("python3",),
             args=("-u",),
@@ -269,7 +272,10 @@ def get_language(name: str) -> Language:
         return LANGUAGES[name]
     except KeyError:
         known = ", ".join(LANGUAGES)
-        raise ValueError(f"Unknown language {name!r}; known languages: {known}.") from None
+        raise ValueError(
+            gettext("Unknown language %(name)s; known languages: %(known)s.")
+            % {"name": repr(name), "known": known}
+        ) from None
 
 
 def language_for_filename(filename: str) -> Language | None:
@@ -283,9 +289,10 @@ def language_choices() -> list[tuple[str, str]]:
 
 def language_options() -> list[tuple[str, str]]:
     """For a form: a language whose interpreter is missing says so (and what to install)."""
+    missing = gettext("%(language)s (not installed: %(install)s)")
     return [
-        (lang.name, lang.label if lang.available else f"{lang.label} (not installed: "
-         f"{lang.install_hint})")
+        (lang.name, lang.label if lang.available
+         else missing % {"language": lang.label, "install": lang.install_hint})
         for lang in LANGUAGES.values()
     ]  # fmt: skip
 

@@ -4,6 +4,8 @@ from django.conf import settings
 from django.db import models, transaction
 from django.utils import timezone
 from django.utils.text import slugify
+from django.utils.translation import gettext, gettext_noop, pgettext_lazy
+from django.utils.translation import gettext_lazy as _
 
 from programs.languages import get_language, language_choices
 
@@ -12,17 +14,22 @@ MAX_SOURCE_BYTES = 512 * 1024
 
 class Program(models.Model):
     owner = models.ForeignKey(
-        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="programs"
+        settings.AUTH_USER_MODEL,
+        on_delete=models.CASCADE,
+        related_name="programs",
+        verbose_name=_("owner"),
     )
-    name = models.CharField(max_length=100)
-    language = models.CharField(max_length=20, choices=language_choices)
-    source = models.TextField(blank=True)
-    created = models.DateTimeField(default=timezone.now)
-    updated = models.DateTimeField(default=timezone.now)
+    name = models.CharField(_("name"), max_length=100)
+    language = models.CharField(_("language"), max_length=20, choices=language_choices)
+    source = models.TextField(_("source"), blank=True)
+    created = models.DateTimeField(_("created"), default=timezone.now)
+    updated = models.DateTimeField(_("updated"), default=timezone.now)
     #: Where it came from, when not written here: "copied from …", "pushed from …", "imported".
-    origin = models.CharField(max_length=300, blank=True)
+    origin = models.CharField(_("origin"), max_length=300, blank=True)
 
     class Meta:
+        verbose_name = _("program")
+        verbose_name_plural = _("programs")
         ordering = ["name"]
         constraints = [
             models.UniqueConstraint(fields=["owner", "name"], name="unique_program_name")
@@ -58,14 +65,21 @@ class Draft(models.Model):
     """What a user typed and has not saved yet, kept by the editor every few seconds: one per
     user and program, apart from the revisions, gone when they save or discard it."""
 
-    user = models.ForeignKey(settings.AUTH_USER_MODEL, on_delete=models.CASCADE)
-    program = models.ForeignKey(Program, on_delete=models.CASCADE, related_name="drafts")
-    source = models.TextField(blank=True)
-    language = models.CharField(max_length=20)
-    base_revision = models.PositiveIntegerField(default=0)  # what the editor started from
-    updated = models.DateTimeField(default=timezone.now)
+    user = models.ForeignKey(
+        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, verbose_name=_("user")
+    )
+    program = models.ForeignKey(
+        Program, on_delete=models.CASCADE, related_name="drafts", verbose_name=_("program")
+    )
+    source = models.TextField(_("source"), blank=True)
+    language = models.CharField(_("language"), max_length=20)
+    # What the editor started from.
+    base_revision = models.PositiveIntegerField(_("base revision"), default=0)
+    updated = models.DateTimeField(_("updated"), default=timezone.now)
 
     class Meta:
+        verbose_name = _("draft")
+        verbose_name_plural = _("drafts")
         constraints = [
             models.UniqueConstraint(fields=["user", "program"], name="one_draft_per_user")
         ]
@@ -77,13 +91,19 @@ class Draft(models.Model):
 
 
 class Revision(models.Model):
-    program = models.ForeignKey(Program, on_delete=models.CASCADE, related_name="revisions")
-    number = models.PositiveIntegerField()
-    source = models.TextField(blank=True)
-    author = models.ForeignKey(settings.AUTH_USER_MODEL, on_delete=models.SET_NULL, null=True)
-    created = models.DateTimeField(default=timezone.now)
+    program = models.ForeignKey(
+        Program, on_delete=models.CASCADE, related_name="revisions", verbose_name=_("program")
+    )
+    number = models.PositiveIntegerField(_("number"))
+    source = models.TextField(_("source"), blank=True)
+    author = models.ForeignKey(
+        settings.AUTH_USER_MODEL, on_delete=models.SET_NULL, null=True, verbose_name=_("author")
+    )
+    created = models.DateTimeField(_("created"), default=timezone.now)
 
     class Meta:
+        verbose_name = _("revision")
+        verbose_name_plural = _("revisions")
         ordering = ["-number"]
         constraints = [
             models.UniqueConstraint(fields=["program", "number"], name="unique_revision_number")
@@ -95,13 +115,14 @@ class Revision(models.Model):
 
 class Run(models.Model):
     class State(models.TextChoices):
-        QUEUED = "queued"
-        STARTING = "starting"
-        RUNNING = "running"
-        FINISHED = "finished"
-        FAILED = "failed"
-        STOPPED = "stopped"
-        LOST = "lost"
+        # The values are machine codes (the API, the pages' CSS); the labels are for people.
+        QUEUED = "queued", pgettext_lazy("run state", "queued")
+        STARTING = "starting", pgettext_lazy("run state", "starting")
+        RUNNING = "running", pgettext_lazy("run state", "running")
+        FINISHED = "finished", pgettext_lazy("run state", "finished")
+        FAILED = "failed", pgettext_lazy("run state", "failed")
+        STOPPED = "stopped", pgettext_lazy("run state", "stopped")
+        LOST = "lost", pgettext_lazy("run state", "lost")
 
     # Handed to an agent, which supervises it: lost if that agent goes away.
     ACTIVE = (State.STARTING, State.RUNNING)
@@ -111,28 +132,47 @@ class Run(models.Model):
     #: Why queued runs do not move while the queue is held (a queued run's `reason`).
     HELD = "the queue is held after an emergency stop; staff or the robot's owner resume it"
 
-    program = models.ForeignKey(Program, on_delete=models.SET_NULL, null=True, related_name="runs")
-    # What ran, kept even if the program is edited or deleted later.
-    program_name = models.CharField(max_length=100)
-    language = models.CharField(max_length=20)
-    source = models.TextField(blank=True)
-    args = models.JSONField(default=list, blank=True)
-    # A robot with a history of runs is not deleted with it: runs belong to their users.
-    robot = models.ForeignKey("robots.Robot", on_delete=models.PROTECT, related_name="runs")
-    owner = models.ForeignKey(
-        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="runs"
+    program = models.ForeignKey(
+        Program,
+        on_delete=models.SET_NULL,
+        null=True,
+        related_name="runs",
+        verbose_name=_("program"),
     )
-    state = models.CharField(max_length=10, choices=State.choices, default=State.STARTING)
-    exit_code = models.IntegerField(null=True, blank=True)
-    reason = models.CharField(max_length=200, blank=True, help_text="How the run ended")
-    created = models.DateTimeField(default=timezone.now)
-    started = models.DateTimeField(null=True, blank=True)
-    ended = models.DateTimeField(null=True, blank=True)
-    pid = models.IntegerField(null=True, blank=True, editable=False)
+    # What ran, kept even if the program is edited or deleted later.
+    program_name = models.CharField(_("program name"), max_length=100)
+    language = models.CharField(_("language"), max_length=20)
+    source = models.TextField(_("source"), blank=True)
+    args = models.JSONField(_("arguments"), default=list, blank=True)
+    # A robot with a history of runs is not deleted with it: runs belong to their users.
+    robot = models.ForeignKey(
+        "robots.Robot", on_delete=models.PROTECT, related_name="runs", verbose_name=_("robot")
+    )
+    owner = models.ForeignKey(
+        settings.AUTH_USER_MODEL,
+        on_delete=models.CASCADE,
+        related_name="runs",
+        verbose_name=_("owner"),
+    )
+    state = models.CharField(
+        _("state"), max_length=10, choices=State.choices, default=State.STARTING
+    )
+    exit_code = models.IntegerField(_("exit code"), null=True, blank=True)
+    reason = models.CharField(
+        _("reason"), max_length=200, blank=True, help_text=_("How the run ended")
+    )
+    created = models.DateTimeField(_("created"), default=timezone.now)
+    started = models.DateTimeField(_("started"), null=True, blank=True)
+    ended = models.DateTimeField(_("ended"), null=True, blank=True)
+    pid = models.IntegerField("PID", null=True, blank=True, editable=False)
     #: While queued: its place in its robot's queue, lowest first (ties: the older first).
-    queue_position = models.PositiveIntegerField(null=True, blank=True, editable=False)
+    queue_position = models.PositiveIntegerField(
+        _("queue position"), null=True, blank=True, editable=False
+    )
 
     class Meta:
+        verbose_name = _("run")
+        verbose_name_plural = _("runs")
         ordering = ["-created"]
         indexes = [models.Index(fields=["state"]), models.Index(fields=["robot", "state"])]
 
@@ -166,7 +206,7 @@ class Run(models.Model):
     def queue_place(self) -> str:
         """Its place as the pages say it: "2nd in line"."""
         rank = self.queue_rank
-        return f"{ordinal(rank)} in line" if rank else ""
+        return in_line(rank) if rank else ""
 
     @property
     def directory(self) -> Path:
@@ -185,7 +225,10 @@ class Run(models.Model):
     @property
     def reason_note(self) -> str:
         """How the run ended, unless the exit code shown beside it says it all."""
-        return "" if self.reason == f"exit status {self.exit_code}" else self.reason
+        if self.reason == f"exit status {self.exit_code}":
+            return ""
+        # Stored in English (data, like the log); the fixed wordings are shown translated.
+        return gettext(self.reason) if self.reason in FIXED_REASONS else self.reason
 
     @property
     def program_file(self) -> str:
@@ -328,33 +371,69 @@ class Run(models.Model):
 
 
 def ordinal(n: int) -> str:
-    """1st, 2nd, 3rd, 4th, 11th, 21st..."""
+    """1st, 2nd, 3rd, 4th, 11th, 21st... (in Portuguese 1º, 2º: the suffixes are translated)."""
     suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
-    return f"{n}{suffix}"
+    return f"{n}{ORDINAL_SUFFIXES[suffix]}"
+
+
+ORDINAL_SUFFIXES = {
+    "st": pgettext_lazy("ordinal suffix, as in 1st", "st"),
+    "nd": pgettext_lazy("ordinal suffix, as in 2nd", "nd"),
+    "rd": pgettext_lazy("ordinal suffix, as in 3rd", "rd"),
+    "th": pgettext_lazy("ordinal suffix, as in 4th", "th"),
+}
+
+
+def in_line(rank: int) -> str:
+    """A queued run's place: "2nd in line"."""
+    return gettext("%(place)s in line") % {"place": ordinal(rank)}
+
+
+#: Reasons a run ended that are always the same words: kept in English in the database and
+#: translated where shown (Run.reason_note).
+FIXED_REASONS = (
+    gettext_noop("the queue is held after an emergency stop; staff or the robot's owner resume it"),
+    gettext_noop("cancelled while queued"),
+    gettext_noop("its robot agent stopped while it ran"),
+)
 
 
 class Share(models.Model):
     """A program shared with one user, one group (a class), or everyone (the gallery)."""
 
-    program = models.ForeignKey(Program, on_delete=models.CASCADE, related_name="shares")
+    program = models.ForeignKey(
+        Program, on_delete=models.CASCADE, related_name="shares", verbose_name=_("program")
+    )
     user = models.ForeignKey(
         settings.AUTH_USER_MODEL,
         null=True,
         blank=True,
         on_delete=models.CASCADE,
         related_name="shared_with_me",
+        verbose_name=_("user"),
     )
     group = models.ForeignKey(
-        "auth.Group", null=True, blank=True, on_delete=models.CASCADE, related_name="shares"
+        "auth.Group",
+        null=True,
+        blank=True,
+        on_delete=models.CASCADE,
+        related_name="shares",
+        verbose_name=_("class"),
     )
-    everyone = models.BooleanField(default=False)
-    can_edit = models.BooleanField(default=False)
+    everyone = models.BooleanField(_("everyone"), default=False)
+    can_edit = models.BooleanField(_("may edit"), default=False)
     created_by = models.ForeignKey(
-        settings.AUTH_USER_MODEL, null=True, on_delete=models.SET_NULL, related_name="+"
+        settings.AUTH_USER_MODEL,
+        null=True,
+        on_delete=models.SET_NULL,
+        related_name="+",
+        verbose_name=_("created by"),
     )
-    created = models.DateTimeField(default=timezone.now)
+    created = models.DateTimeField(_("created"), default=timezone.now)
 
     class Meta:
+        verbose_name = _("share")
+        verbose_name_plural = _("shares")
         ordering = ["created"]
         constraints = [
             models.CheckConstraint(
@@ -385,8 +464,10 @@ class Share(models.Model):
     @property
     def target(self) -> str:
         if self.everyone:
-            return "everyone"
-        return f"group {self.group.name}" if self.group_id else f"user {self.user.username}"
+            return gettext("everyone")
+        if self.group_id:
+            return gettext("group %(name)s") % {"name": self.group.name}
+        return gettext("user %(name)s") % {"name": self.user.username}
 
 
 #: Names of the Robot API clients' modules: a program saved under one of them would be found

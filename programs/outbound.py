@@ -39,6 +39,7 @@ from django.core.cache import cache
 from django.core.exceptions import ValidationError
 from django.core.mail import EmailMessage
 from django.core.validators import EmailValidator
+from django.utils.translation import gettext as _
 
 from programs.models import Program
 
@@ -75,7 +76,7 @@ def origin_text(site: str, user) -> str:
 # -- Rate limits ----------------------------------------------------------------------------------
 
 
-def _take_allowance(kind: str, user, per_hour: int, noun: str) -> str:
+def _take_allowance(kind: str, user, per_hour: int, refusal: str) -> str:
     """Counts one more of ``kind`` for ``user`` in this clock hour, or refuses (429).
 
     Counters live in the cache: per process in embedded mode, shared through Redis in fleet mode.
@@ -90,9 +91,7 @@ def _take_allowance(kind: str, user, per_hour: int, noun: str) -> str:
         count = 1
     if count > per_hour:
         minutes = math.ceil(((window + 1) * 3600 - time.time()) / 60)
-        raise OutboundError(
-            f"You may send at most {per_hour} {noun} an hour: try again in {minutes} min.", 429
-        )
+        raise OutboundError(refusal % {"count": per_hour, "minutes": minutes}, 429)
     return key
 
 
@@ -112,12 +111,19 @@ def email_program(program: Program, to: str, *, user, site: str) -> str:
     try:
         EmailValidator()(to)
     except ValidationError:
-        raise OutboundError(f"{one_line(to, 80)!r} is not an e-mail address.", 422) from None
+        raise OutboundError(
+            _("%(to)s is not an e-mail address.") % {"to": repr(one_line(to, 80))}, 422
+        ) from None
     if settings.EMAIL_PER_HOUR <= 0:
-        raise OutboundError("Sending programs by e-mail is turned off on this robotide.", 403)
-    key = _take_allowance("mail", user, settings.EMAIL_PER_HOUR, "e-mails")
+        raise OutboundError(_("Sending programs by e-mail is turned off on this robotide."), 403)
+    refusal = _("You may send at most %(count)s e-mails an hour: try again in %(minutes)s min.")
+    key = _take_allowance("mail", user, settings.EMAIL_PER_HOUR, refusal)
     message = EmailMessage(
-        subject=one_line(f"{program.name}: a robot program from {user.get_username()}", 150),
+        subject=one_line(
+            _("%(name)s: a robot program from %(sender)s")
+            % {"name": program.name, "sender": user.get_username()},
+            150,
+        ),
         body=_mail_body(program, user, site),
         to=[to],
         reply_to=[user.email] if _is_address(user.email) else None,
@@ -130,7 +136,9 @@ def email_program(program: Program, to: str, *, user, site: str) -> str:
         raise OutboundError(_mail_server_away(exc), 503) from exc
     except smtplib.SMTPException as exc:  # before OSError: it is one
         _give_back(key)
-        raise OutboundError(f"The mail server refused the mail: {_smtp_reason(exc)}.", 502) from exc
+        raise OutboundError(
+            _("The mail server refused the mail: %(why)s.") % {"why": _smtp_reason(exc)}, 502
+        ) from exc
     except OSError as exc:  # refused, no such host, timed out
         _give_back(key)
         raise OutboundError(_mail_server_away(exc), 503) from exc
@@ -143,14 +151,23 @@ def _mail_body(program: Program, user, site: str) -> str:
         sender = f"{user.get_full_name()} ({sender})"
     if _is_address(user.email):
         sender += f" <{user.email}>"
-    written = "" if program.owner_id == user.pk else f", written by {program.owner.get_username()}"
+    about = {"sender": sender, "name": repr(program.name), "language": program.lang.label}
+    about.update(site=site, file=program.filename, author=program.owner.get_username())
+    if program.owner_id == user.pk:
+        said = _("%(sender)s sent you the robot program %(name)s (%(language)s)\n")
+    else:
+        said = _(
+            "%(sender)s sent you the robot program %(name)s (%(language)s, written by %(author)s)\n"
+        )
     return (
-        f"{sender} sent you the robot program {program.name!r} ({program.lang.label}{written})\n"
-        f"from the robotide at {site}/\n\n"
-        f"It is attached as {program.filename}.\n\n"
-        "robotide is a web-based robot programming environment. If you did not expect this\n"
-        "mail, you may ignore it: nothing else will come unless someone there sends it.\n"
-    )
+        said
+        + _(
+            "from the robotide at %(site)s/\n\n"
+            "It is attached as %(file)s.\n\n"
+            "robotide is a web-based robot programming environment. If you did not expect this\n"
+            "mail, you may ignore it: nothing else will come unless someone there sends it.\n"
+        )
+    ) % about
 
 
 def _is_address(value: str) -> bool:
@@ -162,9 +179,16 @@ def _is_address(value: str) -> bool:
 
 
 def _mail_server_away(exc: Exception) -> str:
-    where = f"{settings.EMAIL_HOST}:{settings.EMAIL_PORT}" if settings.EMAIL_HOST else "configured"
     why = exc.strerror if isinstance(exc, OSError) and exc.strerror else type(exc).__name__
-    return f"Cannot send mail now: the mail server ({where}) cannot be reached ({why})."
+    if not settings.EMAIL_HOST:
+        return _(
+            "Cannot send mail now: the configured mail server cannot be reached (%(why)s)."
+        ) % {"why": why}
+    where = f"{settings.EMAIL_HOST}:{settings.EMAIL_PORT}"
+    return _("Cannot send mail now: the mail server (%(where)s) cannot be reached (%(why)s).") % {
+        "where": where,
+        "why": why,
+    }
 
 
 def _smtp_reason(exc: smtplib.SMTPException) -> str:
@@ -192,13 +216,16 @@ def push_program(program: Program, url: str, token: str, *, user, site: str) -> 
     token = (token or "").strip()
     if not token or len(token) > MAX_TOKEN or not token.isascii() or not token.isprintable():
         raise OutboundError(
-            "Give an API token of the account there that should get the program"
-            " (`robotide token USERNAME` on that robotide).",
+            _(
+                "Give an API token of the account there that should get the program"
+                " (`robotide token USERNAME` on that robotide)."
+            ),
             422,
         )
     # Counted whether it arrives or not: each push is a request to an address the user chose,
     # and a refused one still looked up a name the user chose.
-    _take_allowance("push", user, PUSHES_PER_HOUR, "pushes")
+    refusal = _("You may send at most %(count)s pushes an hour: try again in %(minutes)s min.")
+    _take_allowance("push", user, PUSHES_PER_HOUR, refusal)
     addresses = checked_addresses(base)
     body = {
         "name": program.name,
@@ -221,8 +248,11 @@ def push_program(program: Program, url: str, token: str, *, user, site: str) -> 
         if status != 409 or not _is_error(answer):  # 409: the account has a program of that name
             raise OutboundError(_refusal(base, status, answer), 502)
     raise OutboundError(
-        f"The account at {base} already has programs named {program.name!r} to"
-        f" {body['name']!r}: rename the program first.",
+        _(
+            "The account at %(base)s already has programs named %(first)s to %(last)s:"
+            " rename the program first."
+        )
+        % {"base": base, "first": repr(program.name), "last": repr(body["name"])},
         502,
     )
 
@@ -230,7 +260,7 @@ def push_program(program: Program, url: str, token: str, *, user, site: str) -> 
 def robotide_url(url: str) -> str:
     """``http://host:port`` (with a path prefix, if any), or 422."""
     url = (url or "").strip()
-    problem = "Give the other robotide's address as http://HOST:PORT or https://HOST."
+    problem = _("Give the other robotide's address as http://HOST:PORT or https://HOST.")
     if not url or len(url) > MAX_URL or re.search(r"[\s\x00-\x1f\x7f]", url):
         raise OutboundError(problem, 422)
     try:
@@ -241,7 +271,7 @@ def robotide_url(url: str) -> str:
     if parts.scheme.lower() not in ("http", "https") or not parts.hostname:
         raise OutboundError(problem, 422)
     if parts.username is not None or parts.password is not None:
-        raise OutboundError("Give the address without a user name: the token says who.", 422)
+        raise OutboundError(_("Give the address without a user name: the token says who."), 422)
     return urlunsplit((parts.scheme.lower(), parts.netloc, parts.path.rstrip("/"), "", ""))
 
 
@@ -264,10 +294,13 @@ def checked_addresses(base: str) -> list[tuple]:
     except (OSError, UnicodeError) as exc:  # no such host
         raise OutboundError(_unreachable(base), 502) from exc
     # All of them: a name with one public and one private address is refused, not half-used.
-    if not found or not all(_may_push_to(sockaddr[0]) for *_, sockaddr in found):
+    if not found or not all(_may_push_to(sockaddr[0]) for *_rest, sockaddr in found):
         raise OutboundError(
-            f"{base} is not an address to push to: pushes go to public addresses only, and to"
-            " those ROBOTIDE_PUSH_ALLOW lists on this robotide.",
+            _(
+                "%(base)s is not an address to push to: pushes go to public addresses only, and"
+                " to those ROBOTIDE_PUSH_ALLOW lists on this robotide."
+            )
+            % {"base": base},
             403,
         )
     return found
@@ -339,7 +372,7 @@ class _Connection(http.client.HTTPConnection):
 def _connect(addresses: list[tuple], timeout: float) -> socket.socket:
     """A socket connected to the first of ``addresses`` that takes it."""
     error = OSError("no address")
-    for family, kind, proto, _, sockaddr in addresses:
+    for family, kind, proto, _name, sockaddr in addresses:
         sock = socket.socket(family, kind, proto)
         try:
             sock.settimeout(timeout)
@@ -377,7 +410,9 @@ def _post(base: str, addresses: list[tuple], token: str, body: dict):
     # Never what answered, or how it failed: that would make this a port scanner.
     except TimeoutError as exc:
         raise OutboundError(
-            f"{base} is not reachable: no answer within {PUSH_TIMEOUT:g} s.", 504
+            _("%(base)s is not reachable: no answer within %(seconds)s s.")
+            % {"base": base, "seconds": f"{PUSH_TIMEOUT:g}"},
+            504,
         ) from exc
     except http.client.RemoteDisconnected as exc:  # closed without a word: a ConnectionResetError
         raise OutboundError(_unreachable(base), 502) from exc
@@ -426,15 +461,15 @@ def _refusal(base: str, status: int, answer) -> str:
     if not _is_error(answer):
         return _not_a_robotide(base)
     if status in (401, 403):
-        return (
-            f"The token was refused by {base}: make one there for the account that should get"
+        return _(
+            "The token was refused by %(base)s: make one there for the account that should get"
             " the program (`robotide token USERNAME`)."
-        )
+        ) % {"base": base}
     if status == 413:
-        return f"The program is too large for the robotide at {base}."
+        return _("The program is too large for the robotide at %(base)s.") % {"base": base}
     detail = _detail(answer)
     if status in (400, 422) and detail:
-        return f"{base} refused the program: {detail}"
+        return _("%(base)s refused the program: %(detail)s") % {"base": base, "detail": detail}
     return _not_a_robotide(base)
 
 
@@ -449,9 +484,13 @@ def _detail(answer) -> str:
 
 def _unreachable(base: str) -> str:
     if base.startswith("https:"):
-        return f"{base} is not reachable, or its TLS certificate is not trusted here."
-    return f"{base} is not reachable."
+        return _("%(base)s is not reachable, or its TLS certificate is not trusted here.") % {
+            "base": base
+        }
+    return _("%(base)s is not reachable.") % {"base": base}
 
 
 def _not_a_robotide(base: str) -> str:
-    return f"{base} is not a robotide, or not its own address (redirects are not followed)."
+    return _("%(base)s is not a robotide, or not its own address (redirects are not followed).") % {
+        "base": base
+    }

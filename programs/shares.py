@@ -7,6 +7,7 @@ reads these rows on every request, so removing a share takes access away at once
 from django.contrib.auth import get_user_model
 from django.contrib.auth.models import Group
 from django.db import transaction
+from django.utils.translation import gettext as _
 
 from programs.forms import free_name
 from programs.models import Program, Share
@@ -24,21 +25,21 @@ def add_share(
     again with the same target changes whether they may edit."""
     targets = [bool(user), bool(group), bool(everyone)]
     if sum(targets) != 1:
-        raise ShareError("share with one of: a user, a group, or everyone")
+        raise ShareError(_("share with one of: a user, a group, or everyone"))
     target = {"everyone": True}
     if user:
         found = get_user_model().objects.filter(username=user).first()
         if found is None:
-            raise ShareError(f"no user named {user!r}")
+            raise ShareError(_("no user named %(name)s") % {"name": repr(user)})
         if found == program.owner:
-            raise ShareError("a program is always shared with its owner")
+            raise ShareError(_("a program is always shared with its owner"))
         target = {"user": found}
     elif group:
         found = Group.objects.filter(name=group).first()
         if found is None:
-            raise ShareError(f"no group named {group!r}")
+            raise ShareError(_("no group named %(name)s") % {"name": repr(group)})
         target = {"group": found}
-    share, _ = Share.objects.update_or_create(
+    share, _created = Share.objects.update_or_create(
         program=program, **target, defaults={"can_edit": can_edit, "created_by": by}
     )
     return share

@@ -5,6 +5,7 @@ from datetime import datetime
 from django.contrib.auth import get_user_model
 from django.contrib.auth.models import Group
 from django.db import IntegrityError
+from django.utils.translation import gettext as _
 from ninja import Field, Router, Schema
 from ninja.errors import HttpError
 from ninja.responses import Status
@@ -66,9 +67,9 @@ def create_share(request, program_id: int, data: ShareIn):
 @shares_router.delete("/{int:program_id}/shares/{int:share_id}", response={204: None})
 def delete_share(request, program_id: int, share_id: int):
     program = get_program_for_user(request.user, program_id, OWN)
-    deleted, _ = program.shares.filter(pk=share_id).delete()
+    deleted, _rows = program.shares.filter(pk=share_id).delete()
     if not deleted:
-        raise HttpError(404, "No such share.")
+        raise HttpError(404, _("No such share."))
     return Status(204, None)
 
 
@@ -106,7 +107,7 @@ class MemberIn(Body):
 
 def _staff(request) -> None:
     if not request.user.is_staff:
-        raise HttpError(403, "Only staff manage classes.")
+        raise HttpError(403, _("Only staff manage classes."))
 
 
 @groups_router.get("", response=list[GroupOut])
@@ -122,7 +123,8 @@ def create_group(request, data: GroupIn):
     try:
         group = Group.objects.create(name=data.name)
     except IntegrityError:
-        return Status(409, {"detail": f"A group named {data.name!r} exists already."})
+        detail = _("A group named %(name)s exists already.") % {"name": repr(data.name)}
+        return Status(409, {"detail": detail})
     return Status(201, group)
 
 
@@ -134,10 +136,10 @@ def add_member(request, name: str, data: MemberIn):
     _staff(request)
     group = Group.objects.filter(name=name).first()
     if group is None:
-        raise HttpError(404, f"No group named {name!r}.")
+        raise HttpError(404, _("No group named %(name)s.") % {"name": repr(name)})
     user = get_user_model().objects.filter(username=data.user).first()
     if user is None:
-        raise HttpError(422, f"no user named {data.user!r}")
+        raise HttpError(422, _("no user named %(name)s") % {"name": repr(data.user)})
     if data.teacher:
         ClassTeacher.objects.get_or_create(group=group, user=user)
     else:

@@ -8,6 +8,8 @@ from django.db.models import Exists, OuterRef
 from django.http import HttpRequest, HttpResponse, StreamingHttpResponse
 from django.shortcuts import get_object_or_404, redirect, render
 from django.utils.http import content_disposition_header, url_has_allowed_host_and_scheme
+from django.utils.translation import gettext as _
+from django.utils.translation import ngettext
 from django.views.decorators.http import require_POST
 
 from programs import archive, outbound, workbench
@@ -80,7 +82,7 @@ def program_upload(request: HttpRequest) -> HttpResponse:
         owner=request.user, name=data["name"], language=data["language"]
     )
     program.save_source(data["source"], request.user)
-    messages.success(request, f"Uploaded {program.name}.")
+    messages.success(request, _("Uploaded %(name)s.") % {"name": program.name})
     return redirect("program-edit", program.pk)
 
 
@@ -133,7 +135,7 @@ def program_share(request: HttpRequest, program_id: int) -> HttpResponse:
     """The owner shares the program with a user, a class or everyone."""
     program = get_program_for_user(request.user, program_id, OWN)
     target = request.POST.get("target", "").strip()
-    kind, _, name = target.partition(":") if ":" in target else ("user", "", target)
+    kind, _sep, name = target.partition(":") if ":" in target else ("user", "", target)
     if target == "everyone":
         kind = "everyone"
     try:
@@ -143,9 +145,9 @@ def program_share(request: HttpRequest, program_id: int) -> HttpResponse:
             can_edit=request.POST.get("can_edit") == "on",
         )  # fmt: skip
     except ShareError as exc:
-        messages.error(request, f"Not shared: {exc}.")
+        messages.error(request, _("Not shared: %(why)s.") % {"why": exc})
     else:
-        messages.success(request, f"Shared with {share.target}.")
+        messages.success(request, _("Shared with %(target)s.") % {"target": share.target})
     return redirect("program-edit", program.pk)
 
 
@@ -155,7 +157,7 @@ def program_unshare(request: HttpRequest, program_id: int, share_id: int) -> Htt
     program = get_program_for_user(request.user, program_id, OWN)
     share = get_object_or_404(program.shares, pk=share_id)
     share.delete()
-    messages.success(request, f"No longer shared with {share.target}.")
+    messages.success(request, _("No longer shared with %(target)s.") % {"target": share.target})
     return redirect("program-edit", program.pk)
 
 
@@ -167,19 +169,22 @@ def _save_and_act(request, program: Program, form: EditProgramForm) -> HttpRespo
     if not can(request.user, EDIT, program):
         if action == "run":  # a read-only program runs as it is
             return _start(request, program, request.POST.get("robot", ""))
-        raise PermissionDenied("This program is shared with you read-only: save a copy.")
+        raise PermissionDenied(workbench.read_only())
     try:
         revision = workbench.save_edit(request, program, data)
     except workbench.Conflict as conflict:
         form.add_error(
             None,
-            f"Not saved: revision {conflict.latest} was saved after you opened this program, and"
-            " nothing was overwritten. What differs is below; Save again to save yours over it.",
+            _(
+                "Not saved: revision %(number)s was saved after you opened this program, and"
+                " nothing was overwritten. What differs is below; Save again to save yours over it."
+            )
+            % {"number": conflict.latest},
         )
         return _render_editor(request, program, form, status=409, conflict=conflict)
     if action == "run":
         return _start(request, program, request.POST.get("robot", ""))
-    messages.success(request, f"Saved (revision {revision.number}).")
+    messages.success(request, _("Saved (revision %(number)s).") % {"number": revision.number})
     return redirect("program-edit", program.pk)
 
 
@@ -189,13 +194,13 @@ def _save_copy(request, program: Program, form: EditProgramForm) -> HttpResponse
     try:
         name = unique_name(request.user, data["save_as"])
         if not name:
-            raise ValidationError("Give the copy a name.")
+            raise ValidationError(_("Give the copy a name."))
     except ValidationError as exc:
         form.add_error("save_as", exc)
         return _render_editor(request, program, form, status=400)
     copy = Program.objects.create(owner=request.user, name=name, language=data["language"])
     copy.save_source(data["source"], request.user)
-    messages.success(request, f"Saved a copy as {copy.name}.")
+    messages.success(request, _("Saved a copy as %(name)s.") % {"name": copy.name})
     return redirect("program-edit", copy.pk)
 
 
@@ -239,7 +244,7 @@ def program_export(request: HttpRequest) -> HttpResponse:
 def program_import(request: HttpRequest) -> HttpResponse:
     upload = request.FILES.get("file")
     if upload is None:
-        messages.error(request, "Choose a zip file to import.")
+        messages.error(request, _("Choose a zip file to import."))
         return redirect("program-list")
     replace = request.POST.get("replace", "") in ("true", "on", "1")
     try:
@@ -247,13 +252,25 @@ def program_import(request: HttpRequest) -> HttpResponse:
             upload.read(), request.user, filename=upload.name, replace=replace
         )
     except archive.ArchiveError as exc:
-        messages.error(request, f"Nothing was imported from {upload.name}: {exc}")
+        messages.error(
+            request,
+            _("Nothing was imported from %(file)s: %(why)s") % {"file": upload.name, "why": exc},
+        )
         return redirect("program-list")
-    messages.success(request, f"Imported {upload.name}: {report.summary()}.")
+    messages.success(
+        request,
+        _("Imported %(file)s: %(summary)s.") % {"file": upload.name, "summary": report.summary()},
+    )
     if report.skipped:
         shown = "; ".join(f"{s.file} ({s.why})" for s in report.skipped[:10])
-        more = f" and {len(report.skipped) - 10} more" if len(report.skipped) > 10 else ""
-        messages.warning(request, f"Skipped {shown}{more}.")
+        more = len(report.skipped) - 10
+        if more > 0:
+            text = ngettext(
+                "Skipped %(files)s and %(more)s more.", "Skipped %(files)s and %(more)s more.", more
+            )
+        else:
+            text = _("Skipped %(files)s.")
+        messages.warning(request, text % {"files": shown, "more": more})
     return redirect("program-list")
 
 
@@ -263,7 +280,7 @@ def program_delete(request: HttpRequest, program_id: int) -> HttpResponse:
     if request.method == "POST":
         name = program.name
         program.delete()
-        messages.success(request, f"Deleted {name}.")
+        messages.success(request, _("Deleted %(name)s.") % {"name": name})
         return redirect("program-list")
     return render(request, "programs/delete.html", {"program": program})
 
@@ -285,13 +302,17 @@ def revision_detail(request: HttpRequest, program_id: int, number: int) -> HttpR
     if request.method == "POST":
         get_program_for_user(request.user, program_id, EDIT)
         restored = program.save_source(revision.source, request.user)
-        messages.success(request, f"Restored revision {number} as revision {restored.number}.")
+        messages.success(
+            request,
+            _("Restored revision %(old)s as revision %(new)s.")
+            % {"old": number, "new": restored.number},
+        )
         return redirect("program-edit", program.pk)
     diff = difflib.unified_diff(
         revision.source.splitlines(),
         program.source.splitlines(),
-        fromfile=f"revision {revision.number}",
-        tofile="current",
+        fromfile=_("revision %(number)s") % {"number": revision.number},
+        tofile=_("current"),
         lineterm="",
     )
     return render(
@@ -319,7 +340,7 @@ def program_email(request: HttpRequest, program_id: int) -> HttpResponse:
     except outbound.OutboundError as exc:
         messages.error(request, str(exc))
     else:
-        messages.success(request, f"Sent {program.name} to {to}.")
+        messages.success(request, _("Sent %(name)s to %(to)s.") % {"name": program.name, "to": to})
     return redirect("program-edit", program.pk)
 
 
@@ -340,8 +361,13 @@ def program_push(request: HttpRequest, program_id: int) -> HttpResponse:
     else:
         messages.success(
             request,
-            f"Pushed {program.name} to {arrived['url']}: it is {arrived['name']!r}"
-            f" of {arrived['owner'] or 'the account'} there.",
+            _("Pushed %(name)s to %(url)s: it is %(there)s of %(owner)s there.")
+            % {
+                "name": program.name,
+                "url": arrived["url"],
+                "there": repr(arrived["name"]),
+                "owner": arrived["owner"] or _("the account"),
+            },
         )
     return redirect("program-edit", program.pk)
 
@@ -405,7 +431,8 @@ def run_stop(request: HttpRequest, run_id: int) -> HttpResponse:
         if request.htmx:
             return HttpResponse(status=204)
         cancelled = queued and run.state == Run.State.STOPPED
-        messages.info(request, f"{'Cancelled' if cancelled else 'Stopping'} run {run.pk}.")
+        said = _("Cancelled run %(id)s.") if cancelled else _("Stopping run %(id)s.")
+        messages.info(request, said % {"id": run.pk})
     next_url = request.POST.get("next", "")
     if url_has_allowed_host_and_scheme(next_url, allowed_hosts={request.get_host()}):
         return redirect(next_url)

@@ -22,6 +22,7 @@ from django.db import transaction
 from django.http import HttpRequest, HttpResponse, JsonResponse
 from django.shortcuts import redirect, render
 from django.utils import timezone
+from django.utils.translation import gettext as _
 from django.views.decorators.http import require_GET, require_POST
 
 from programs import blocks
@@ -43,8 +44,8 @@ class Conflict(Exception):
             difflib.unified_diff(
                 (latest.source if latest else "").splitlines(keepends=True),
                 source.splitlines(keepends=True),
-                f"revision {self.latest} (saved since you opened it)",
-                "your text",
+                _("revision %(number)s (saved since you opened it)") % {"number": self.latest},
+                _("your text"),
             )
         )
         super().__init__(f"revision {self.latest} was saved after revision {base}")
@@ -140,7 +141,7 @@ def blocks_python(request: HttpRequest, program_id: int) -> JsonResponse:
     get_program_for_user(request.user, program_id)
     source = request.POST.get("source", "")
     if not source.strip():
-        return JsonResponse({"python": "# No blocks yet: drag some from the toolbox.\n"})
+        return JsonResponse({"python": _("# No blocks yet: drag some from the toolbox.") + "\n"})
     try:
         return JsonResponse({"python": blocks.to_python(source)})
     except ValueError as exc:
@@ -155,23 +156,27 @@ def blocks_as_python(request: HttpRequest, program_id: int) -> HttpResponse:
     try:
         code = blocks.to_python(request.POST.get("source", program.source))
     except ValueError as exc:
-        messages.error(request, f"These blocks do not make a program yet: {exc}")
+        messages.error(request, _("These blocks do not make a program yet: %(why)s") % {"why": exc})
         return redirect("program-edit", program.pk)
-    name = free_name(request.user, f"{program.name} (Python)")
+    name = free_name(request.user, _("%(name)s (Python)") % {"name": program.name})
     copy = Program.objects.create(owner=request.user, name=name, language="python")
     copy.save_source(code, request.user)
-    messages.success(request, f"Copied as the Python program {copy.name}.")
+    messages.success(request, _("Copied as the Python program %(name)s.") % {"name": copy.name})
     return redirect("program-edit", copy.pk)
 
 
 def _save(request: HttpRequest, program: Program) -> int:
     """Save the posted text as a new revision; its number. ValueError for a bad form."""
     if not can(request.user, EDIT, program):
-        raise PermissionDenied("This program is shared with you read-only: save a copy.")
+        raise PermissionDenied(read_only())
     form = EditProgramForm(request.POST)
     if not form.is_valid():
         raise ValueError("; ".join(_errors(form)))
     return save_edit(request, program, form.cleaned_data).number
+
+
+def read_only() -> str:
+    return _("This program is shared with you read-only: save a copy.")
 
 
 def save_edit(request: HttpRequest, program: Program, data: dict) -> Revision:

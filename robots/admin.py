@@ -1,5 +1,8 @@
 from django import forms
 from django.contrib import admin
+from django.utils.text import format_lazy
+from django.utils.translation import gettext
+from django.utils.translation import gettext_lazy as _
 
 from gateway import specs
 from robots.bus import announce_robot_sync, reconfigure_sync, tell_agent_sync
@@ -13,7 +16,11 @@ class RobotAdminForm(RobotConfigForm):
 
     run_settings = forms.JSONField(
         required=False,
-        help_text=f"Settings of the programs run here, as JSON: {', '.join(RUN_SETTINGS)}",
+        label=_("Run settings"),
+        help_text=format_lazy(
+            _("Settings of the programs run here, as JSON: {settings}"),
+            settings=", ".join(RUN_SETTINGS),
+        ),
     )
 
     class Meta(RobotConfigForm.Meta):
@@ -28,7 +35,10 @@ class RobotAdminForm(RobotConfigForm):
             given = self.cleaned_data.get("run_settings") or {}
             unknown = set(given) - set(RUN_SETTINGS)
             if unknown:
-                self.add_error("run_settings", f"not a run setting: {', '.join(sorted(unknown))}")
+                self.add_error(
+                    "run_settings",
+                    gettext("not a run setting: %(names)s") % {"names": ", ".join(sorted(unknown))},
+                )
             return {k: v for k, v in given.items() if k in RUN_SETTINGS}
         return super()._run_settings()
 
@@ -55,13 +65,11 @@ class EndpointInline(admin.TabularInline):
     form = EndpointForm
     extra = 0
     readonly_fields = ["role"]
-    verbose_name = "MAVLink gateway endpoint"
 
 
 class BridgeInline(admin.TabularInline):
     model = SerialBridge
     extra = 0
-    verbose_name = "serial bridge"
 
 
 @admin.register(Robot)
@@ -107,7 +115,7 @@ class RobotStopAdmin(admin.ModelAdmin):
     search_fields = ["username", "robot__name"]
     date_hierarchy = "at"
 
-    @admin.display(description="runs ended")
+    @admin.display(description=_("runs ended"))
     def ended(self, stop: RobotStop) -> str:
         return ", ".join(f"#{r['run']} {r['program']} ({r['owner']})" for r in stop.runs) or "—"
 

@@ -1,6 +1,7 @@
 import re
 
 from django.db import IntegrityError
+from django.utils.translation import gettext as _
 from ninja import Field, Router, Schema
 from ninja.errors import HttpError
 from ninja.responses import Status
@@ -66,11 +67,12 @@ def list_robots(request):
 @robots_router.post("", response={201: RobotOut, 409: dict})
 def create_robot(request, data: RobotIn):
     if not request.user.is_staff:
-        raise HttpError(403, "Only staff may add robots.")
+        raise HttpError(403, _("Only staff may add robots."))
     try:
         robot = Robot.objects.create(**data.dict(), owner=request.user)
     except IntegrityError:
-        return Status(409, {"detail": f"A robot named {data.name!r} exists already."})
+        detail = _("A robot named %(name)s exists already.") % {"name": repr(data.name)}
+        return Status(409, {"detail": detail})
     announce_robot_sync(robot.name)
     return Status(201, robot)
 
@@ -84,7 +86,7 @@ def get_robot(request, name: str):
 def update_robot(request, name: str, data: RobotPatch):
     """Change a robot's URL, settings or description; its agent reopens the robot with them."""
     if not request.user.is_staff:
-        raise HttpError(403, "Only staff may change robots.")
+        raise HttpError(403, _("Only staff may change robots."))
     robot = get_robot_for_user(request.user, name)
     changes = data.dict(exclude_none=True)
     url, settings = changes.get("url", robot.url), changes.get("settings", robot.settings)

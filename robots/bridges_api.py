@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Literal
 
+from django.utils.translation import gettext as _
 from ninja import Field, Router, Schema
 from ninja.errors import HttpError
 from ninja.responses import Status
@@ -32,14 +33,17 @@ class BridgeIn(Body):
     @classmethod
     def a_path(cls, value):
         if value and not value.startswith("/"):
-            raise ValueError("device must be a path such as /dev/ttyUSB0, or empty")
+            raise ValueError(_("device must be a path such as /dev/ttyUSB0, or empty"))
         return value
 
     @field_validator("baud")
     @classmethod
     def a_speed(cls, value):
         if value not in specs.BAUDS:
-            raise ValueError(f"baud must be a serial speed ({', '.join(map(str, specs.BAUDS))})")
+            raise ValueError(
+                _("baud must be a serial speed (%(bauds)s)")
+                % {"bauds": ", ".join(map(str, specs.BAUDS))}
+            )
         return value
 
     @field_validator("address")
@@ -64,7 +68,7 @@ class BridgeOut(Schema):
 def _robot(request, name: str, change: bool = False) -> Robot:
     robot = get_robot_for_user(request.user, name)
     if change and not robot.configurable_by(request.user):
-        raise HttpError(403, "Only the robot's owner or staff change its serial bridges.")
+        raise HttpError(403, _("Only the robot's owner or staff change its serial bridges."))
     return robot
 
 
@@ -80,8 +84,8 @@ def bridge_out(row: SerialBridge, live: dict | None) -> dict:
     fields = {k: getattr(row, k) for k in ("id", "device", "baud", "address", "protocol")}
     fields["when_busy"] = row.when_busy
     if live is None:
-        return {**fields, "status": "unknown", "error": "the robot's agent is not answering"}
-    found = dict(live.get(str(row.pk)) or {"status": "error", "error": "not started"})
+        return {**fields, "status": "unknown", "error": _("the robot's agent is not answering")}
+    found = dict(live.get(str(row.pk)) or {"status": "error", "error": _("not started")})
     status, error = found.pop("status", "up"), found.pop("error", "")
     return {
         **fields,
@@ -113,8 +117,12 @@ def add_bridge(request, name: str, data: BridgeIn):
 @bridges_router.delete("/{name}/bridges/{int:bridge_id}", response={204: None})
 def delete_bridge(request, name: str, bridge_id: int):
     robot = _robot(request, name, change=True)
-    deleted, _ = robot.bridges.filter(pk=bridge_id).delete()
+    deleted, _rows = robot.bridges.filter(pk=bridge_id).delete()
     if not deleted:
-        raise HttpError(404, f"Robot {robot.name!r} has no serial bridge {bridge_id}.")
+        raise HttpError(
+            404,
+            _("Robot %(robot)s has no serial bridge %(id)s.")
+            % {"robot": repr(robot.name), "id": bridge_id},
+        )
     live_stats(robot, "bridges.reload")
     return Status(204, None)

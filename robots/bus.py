@@ -9,6 +9,7 @@ import threading
 
 from asgiref.sync import async_to_sync
 from channels.layers import get_channel_layer
+from django.utils.translation import gettext as _
 
 from robots.models import agent_channel
 
@@ -41,7 +42,8 @@ async def ask_agent(robot_name: str, type: str, timeout: float = 3.0, **data) ->
         reply = await asyncio.wait_for(layer.receive(reply_to), timeout)
     except TimeoutError:
         raise AgentUnavailable(
-            f"The agent of robot {robot_name!r} did not answer within {timeout:g} s; is it running?"
+            _("The agent of robot %(robot)s did not answer within %(seconds)s s; is it running?")
+            % {"robot": repr(robot_name), "seconds": f"{timeout:g}"}
         ) from None
     if "error" in reply:
         raise AgentUnavailable(reply["error"])

@@ -8,6 +8,7 @@ from channels.db import database_sync_to_async
 from channels.generic.websocket import AsyncWebsocketConsumer
 from django.http import Http404
 from django.template.loader import render_to_string
+from django.utils.translation import gettext as _
 
 from programs.access import runs_for_user
 from programs.models import Run
@@ -79,7 +80,10 @@ class RobotConsumer(AsyncWebsocketConsumer):
         user = self.scope["user"]
         robot, owner = self.robot.name, self.channel_name
         if kind in ("drive", "take") and not self.may_drive:
-            error = f"Only {self.robot.get_drive_by_display()} may drive {robot}."
+            error = _("Only %(who)s may drive %(robot)s.") % {
+                "who": self.robot.get_drive_by_display(),
+                "robot": robot,
+            }
             await self.robot_teleop_error({"error": error})
             return
         if kind == "drive":

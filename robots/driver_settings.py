@@ -13,6 +13,8 @@ from urllib.parse import urlsplit
 
 from django import forms
 from django.conf import settings as django_settings
+from django.utils.translation import gettext as _
+from django.utils.translation import pgettext
 
 import rhal
 from rhal.camera import CameraSettings
@@ -28,7 +30,9 @@ def known_driver(url: str) -> str:
     scheme = urlsplit(url).scheme.lower()
     if scheme not in rhal.DRIVERS:
         known = ", ".join(f"{name}://" for name in sorted(rhal.DRIVERS))
-        raise ValueError(f"no robot driver for {url!r}; known: {known}")
+        raise ValueError(
+            _("no robot driver for %(url)s; known: %(known)s") % {"url": repr(url), "known": known}
+        )
     return url
 
 
@@ -42,7 +46,7 @@ def check_settings(url: str, settings: dict) -> None:
         Policy.from_settings(robot.run_isolation(django_settings.RUN_ISOLATION))
         rhal.connect(url, **robot.driver_options())  # builds the driver, opens nothing
     except (TypeError, ValueError, AttributeError, rhal.RhalError, IsolationUnavailable) as exc:
-        raise ValueError(f"settings: {exc}") from None
+        raise ValueError(_("settings: %(why)s") % {"why": exc}) from None
 
 
 def options_for(robot: Robot) -> list[Option]:
@@ -59,22 +63,19 @@ def current_values(robot: Robot) -> list[dict[str, Any]]:
     rows = []
     for option in options_for(robot):
         if option.name in robot.settings:
-            value, source = robot.settings[option.name], "set here"
+            value, source = robot.settings[option.name], _("set here")
         elif option.name in query:
-            value, source = query[option.name], "from the URL"
+            value, source = query[option.name], _("from the URL")
         else:
-            value, source = option.default, "default"
+            value, source = option.default, pgettext("source of a value", "default")
         rows.append({"option": option, "value": value, "source": source})
     return rows
 
 
 def option_field(option: Option, initial: Any) -> forms.Field:
-    default = "none" if option.default is None else option.default
-    common = {
-        "required": False,
-        "initial": initial,
-        "help_text": f"{option.help} (default: {default})".lstrip(),
-    }
+    default = pgettext("no value", "none") if option.default is None else option.default
+    help_text = _("%(help)s (default: %(default)s)") % {"help": option.help, "default": default}
+    common = {"required": False, "initial": initial, "help_text": help_text.lstrip()}
     if option.kind is bool:
         return forms.BooleanField(**common)
     if option.kind is int:

@@ -2,6 +2,7 @@ import shlex
 from urllib.parse import urlsplit
 
 from django import forms
+from django.utils.translation import gettext_lazy as _
 
 from programs.access import programs_for_user
 from robots.driver_settings import add_option_fields, check_settings, known_driver, settings_from
@@ -20,7 +21,7 @@ class RobotConfigForm(forms.ModelForm):
     class Meta:
         model = Robot
         fields = ["url", "description", "drive_by", "estop_by"]
-        labels = {"url": "URL", "drive_by": "Who may drive it", "estop_by": "Who may stop it"}
+        labels = {"url": "URL", "drive_by": _("Who may drive it"), "estop_by": _("Who may stop it")}
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -75,7 +76,8 @@ class ButtonForm(forms.ModelForm):
     arguments = forms.CharField(
         required=False,
         max_length=500,
-        help_text='Passed to the program as its command-line arguments, e.g. 0.3 "slow turn"',
+        label=_("Arguments"),
+        help_text=_('Passed to the program as its command-line arguments, e.g. 0.3 "slow turn"'),
     )
 
     class Meta:
@@ -93,13 +95,13 @@ class ButtonForm(forms.ModelForm):
         try:
             return shlex.split(self.cleaned_data["arguments"])
         except ValueError as exc:  # an unclosed quote
-            raise forms.ValidationError(f"arguments: {exc}") from None
+            raise forms.ValidationError(_("arguments: %(why)s") % {"why": exc}) from None
 
     def clean_label(self):
         label = self.cleaned_data["label"].strip()
         taken = RobotButton.objects.filter(robot=self.instance.robot, label=label)
         if taken.exclude(pk=self.instance.pk).exists():
-            raise forms.ValidationError("This robot has a button with that label already.")
+            raise forms.ValidationError(_("This robot has a button with that label already."))
         return label
 
     def save(self, commit=True):

@@ -12,6 +12,7 @@ from datetime import UTC, datetime
 from urllib.parse import urlsplit
 
 from django.http import FileResponse, HttpRequest
+from django.utils.translation import gettext as _
 from ninja import Field, Router, Schema
 from ninja.errors import HttpError
 from ninja.responses import Status
@@ -91,10 +92,14 @@ def has_router(robot: Robot) -> bool:
 def _mavlink_robot(request: HttpRequest, name: str, change: bool = False) -> Robot:
     robot = get_robot_for_user(request.user, name)
     if change and not robot.configurable_by(request.user):
-        raise HttpError(403, "Only the robot's owner or staff change its endpoints.")
+        raise HttpError(403, _("Only the robot's owner or staff change its endpoints."))
     if not has_router(robot):
-        raise HttpError(409, f"Robot {name!r} is not a MAVLink robot: it has no router.")
+        raise HttpError(409, no_router(name))
     return robot
+
+
+def no_router(name: str) -> str:
+    return _("Robot %(robot)s is not a MAVLink robot: it has no router.") % {"robot": repr(name)}
 
 
 def live_stats(robot: Robot, kind: str = "gateway.stats") -> dict | None:
@@ -108,10 +113,10 @@ def live_stats(robot: Robot, kind: str = "gateway.stats") -> dict | None:
 def endpoint_out(key, role: str, spec: dict, live: dict | None) -> dict:
     row = {"id": key, "role": role, **spec}
     if live is None:
-        return {**row, "status": "unknown", "error": "the robot's agent is not answering"}
+        return {**row, "status": "unknown", "error": _("the robot's agent is not answering")}
     found = live.get(str(key))
     if found is None:
-        return {**row, "status": "down", "error": "not started"}
+        return {**row, "status": "down", "error": _("not started")}
     return {**row, **{k: found[k] for k in LIVE_KEYS if k in found}}
 
 
@@ -180,7 +185,11 @@ def _row(robot: Robot, endpoint_id: int) -> GatewayEndpoint:
     try:
         return robot.endpoints.get(pk=endpoint_id)
     except GatewayEndpoint.DoesNotExist:
-        raise HttpError(404, f"Robot {robot.name!r} has no endpoint {endpoint_id}.") from None
+        raise HttpError(
+            404,
+            _("Robot %(robot)s has no endpoint %(id)s.")
+            % {"robot": repr(robot.name), "id": endpoint_id},
+        ) from None
 
 
 # -- recordings ---------------------------------------------------------------------------
@@ -245,6 +254,10 @@ def download_recording(request, name: str, file: str):
     robot = _mavlink_robot(request, name)
     path = recordings_dir(robot.name) / file
     if not TLOG_NAME.match(file) or not path.is_file():
-        raise HttpError(404, f"Robot {robot.name!r} has no recording {file!r}.")
+        raise HttpError(
+            404,
+            _("Robot %(robot)s has no recording %(file)s.")
+            % {"robot": repr(robot.name), "file": repr(file)},
+        )
     return FileResponse(path.open("rb"), as_attachment=True, filename=file,
                         content_type="application/octet-stream")  # fmt: skip

@@ -6,6 +6,7 @@ from django.contrib.auth.decorators import login_required
 from django.core.exceptions import PermissionDenied
 from django.http import HttpRequest, HttpResponse
 from django.shortcuts import get_object_or_404, redirect, render
+from django.utils.translation import gettext as _
 from django.views.decorators.http import require_POST
 
 from gateway import specs
@@ -163,12 +164,12 @@ def robot_gateway(request: HttpRequest, name: str) -> HttpResponse:
 def _configurable(request: HttpRequest, name: str):
     robot = get_robot_for_user(request.user, name)
     if not robot.configurable_by(request.user):
-        raise PermissionDenied("Only the robot's owner or staff change its endpoints.")
+        raise PermissionDenied(_("Only the robot's owner or staff change its endpoints."))
     return robot
 
 
 def _no_router(robot) -> HttpResponse:
-    why = f"Robot {robot.name!r} is not a MAVLink robot: it has no router."
+    why = gateway_api.no_router(robot.name)
     return HttpResponse(why, status=409, content_type="text/plain")
 
 
@@ -180,7 +181,7 @@ def endpoint_spec(form) -> dict:
         spec["device"] = form.get("device", "").strip()
         baud = form.get("baud", "").strip() or "57600"
         if not baud.isdigit():
-            raise ValueError(f"baud must be a serial speed, not {baud!r}")
+            raise ValueError(_("baud must be a serial speed, not %(baud)s") % {"baud": repr(baud)})
         spec["baud"] = int(baud)
     else:
         spec["mode"] = form.get("mode", "client").strip()
@@ -197,7 +198,10 @@ def _message_ids(name: str, text: str) -> list[int]:
     words = [word for word in text.replace(",", " ").split() if word]
     bad = [word for word in words if not word.isdigit()]
     if bad:
-        raise ValueError(f"{name}: message ids are numbers separated by commas, not {bad[0]!r}")
+        raise ValueError(
+            _("%(field)s: message ids are numbers separated by commas, not %(bad)s")
+            % {"field": name, "bad": repr(bad[0])}
+        )
     return [int(word) for word in words]
 
 
@@ -212,15 +216,18 @@ def robot_endpoint_add(request: HttpRequest, name: str) -> HttpResponse:
     except ValueError as exc:
         if request.htmx:  # htmx swaps 2xx answers only: the card says what is wrong
             return _render_gateway(request, robot, error=str(exc), form=request.POST)
-        messages.error(request, f"Endpoint not added: {exc}")
+        messages.error(request, _("Endpoint not added: %(why)s") % {"why": exc})
         return redirect("robot-detail", robot.name)
     row = gateway_api.add_endpoint_row(robot, spec)
-    said = f"Endpoint {specs.describe(spec)} added"
+    said = _("Endpoint %(endpoint)s added.") % {"endpoint": specs.describe(spec)}
     if row["status"] == "error":
-        said += f", but it does not run: {row['error']}"
+        said = _("Endpoint %(endpoint)s added, but it does not run: %(why)s.") % {
+            "endpoint": specs.describe(spec),
+            "why": row["error"],
+        }
     if request.htmx:
-        return _render_gateway(request, robot, notice=said + ".")
-    (messages.warning if row["status"] == "error" else messages.success)(request, said + ".")
+        return _render_gateway(request, robot, notice=said)
+    (messages.warning if row["status"] == "error" else messages.success)(request, said)
     return redirect("robot-detail", robot.name)
 
 
@@ -234,9 +241,9 @@ def robot_endpoint_delete(request: HttpRequest, name: str, endpoint_id: int) -> 
     try:
         text = specs.describe(endpoint.spec())
     except (KeyError, ValueError):
-        text = f"endpoint {endpoint.pk}"
+        text = _("endpoint %(id)s") % {"id": endpoint.pk}
     gateway_api.delete_endpoint_row(robot, endpoint.pk)
-    said = f"Endpoint {text} removed."
+    said = _("Endpoint %(endpoint)s removed.") % {"endpoint": text}
     if request.htmx:
         return _render_gateway(request, robot, notice=said)
     messages.success(request, said)

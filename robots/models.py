@@ -4,6 +4,8 @@ from django.conf import settings as django_settings
 from django.db import models
 from django.http import Http404
 from django.utils import timezone
+from django.utils.translation import gettext
+from django.utils.translation import gettext_lazy as _
 
 # Settings for the runs on a robot; anything else in its `settings` goes to its driver.
 RUN_SETTINGS = (
@@ -13,37 +15,50 @@ RUN_SETTINGS = (
 
 
 WHO = [
-    ("everyone", "everyone who may see it"),
-    ("teachers", "the teachers of its classes, its owner and staff"),
-    ("owner", "its owner and staff"),
+    ("everyone", _("everyone who may see it")),
+    ("teachers", _("the teachers of its classes, its owner and staff")),
+    ("owner", _("its owner and staff")),
 ]
 
 
 class Robot(models.Model):
     """A robot this appliance controls; its agent owns the hardware behind `url`."""
 
-    name = models.SlugField(max_length=50, unique=True)
+    name = models.SlugField(_("name"), max_length=50, unique=True)
     url = models.CharField(
-        max_length=500, help_text="Driver URL, e.g. sim:// or pioneer:///dev/ttyUSB0"
+        "URL", max_length=500, help_text=_("Driver URL, e.g. sim:// or pioneer:///dev/ttyUSB0")
     )
-    settings = models.JSONField(default=dict, blank=True)
-    description = models.CharField(max_length=200, blank=True)
-    created = models.DateTimeField(default=timezone.now)
+    settings = models.JSONField(_("settings"), default=dict, blank=True)
+    description = models.CharField(_("description"), max_length=200, blank=True)
+    created = models.DateTimeField(_("created"), default=timezone.now)
     last_seen = models.DateTimeField(
-        null=True, blank=True, editable=False, help_text="Its agent's last heartbeat"
+        _("last seen"),
+        null=True,
+        blank=True,
+        editable=False,
+        help_text=_("Its agent's last heartbeat"),
     )
     agent_host = models.CharField(
-        max_length=200, blank=True, editable=False, help_text="Where its agent runs"
+        _("agent host"),
+        max_length=200,
+        blank=True,
+        editable=False,
+        help_text=_("Where its agent runs"),
     )
-    agent_started = models.DateTimeField(null=True, blank=True, editable=False)
+    agent_started = models.DateTimeField(_("agent started"), null=True, blank=True, editable=False)
     isolation = models.CharField(
-        max_length=200, blank=True, editable=False, help_text="What its agent gives each run"
+        _("isolation"),
+        max_length=200,
+        blank=True,
+        editable=False,
+        help_text=_("What its agent gives each run"),
     )
     groups = models.ManyToManyField(
         "auth.Group",
         blank=True,
         related_name="robots",
-        help_text="Only these classes (and their teachers) may use it; none: everyone",
+        verbose_name=_("classes"),
+        help_text=_("Only these classes (and their teachers) may use it; none: everyone"),
     )
     owner = models.ForeignKey(
         django_settings.AUTH_USER_MODEL,
@@ -51,24 +66,30 @@ class Robot(models.Model):
         blank=True,
         on_delete=models.SET_NULL,
         related_name="robots",
-        help_text="Who looks after it: with staff, configures its buttons",
+        verbose_name=_("owner"),
+        help_text=_("Who looks after it: with staff, configures its buttons"),
     )
 
     gateway_seeded = models.BooleanField(
-        default=False, editable=False, help_text="Its default gateway endpoints were made"
+        _("gateway seeded"),
+        default=False,
+        editable=False,
+        help_text=_("Its default gateway endpoints were made"),
     )
     # Who may move it, among those who may see it (its classes). Safety first: everyone who
     # sees a robot may stop it unless its owner says otherwise.
     drive_by = models.CharField(
-        max_length=10, choices=WHO, default="everyone",
-        help_text="Who may drive it, with programs or by hand",
+        _("who may drive it"), max_length=10, choices=WHO, default="everyone",
+        help_text=_("Who may drive it, with programs or by hand"),
     )  # fmt: skip
     estop_by = models.CharField(
-        max_length=10, choices=WHO, default="everyone",
-        help_text="Who may press its emergency stop",
+        _("who may stop it"), max_length=10, choices=WHO, default="everyone",
+        help_text=_("Who may press its emergency stop"),
     )  # fmt: skip
 
     class Meta:
+        verbose_name = _("robot")
+        verbose_name_plural = _("robots")
         ordering = ["name"]
 
     def __str__(self) -> str:
@@ -116,24 +137,39 @@ class Robot(models.Model):
 class RobotStop(models.Model):
     """An emergency stop pressed, or a robot let move again after one: who, when, what ran."""
 
-    robot = models.ForeignKey(Robot, on_delete=models.CASCADE, related_name="stops")
-    kind = models.CharField(max_length=10, choices=[("estop", "emergency stop"),
-                                                    ("resume", "resumed")])  # fmt: skip
-    user = models.ForeignKey(
-        django_settings.AUTH_USER_MODEL, null=True, on_delete=models.SET_NULL, related_name="+"
+    robot = models.ForeignKey(
+        Robot, on_delete=models.CASCADE, related_name="stops", verbose_name=_("robot")
     )
-    username = models.CharField(max_length=150, help_text="As it was then")
-    at = models.DateTimeField(default=timezone.now)
-    via = models.CharField(max_length=20, help_text="the robot's page, the API...")
+    kind = models.CharField(_("kind"), max_length=10, choices=[
+        ("estop", _("emergency stop")), ("resume", _("resumed"))])  # fmt: skip
+    user = models.ForeignKey(
+        django_settings.AUTH_USER_MODEL,
+        null=True,
+        on_delete=models.SET_NULL,
+        related_name="+",
+        verbose_name=_("user"),
+    )
+    username = models.CharField(_("user name"), max_length=150, help_text=_("As it was then"))
+    at = models.DateTimeField(_("at"), default=timezone.now)
+    via = models.CharField(_("via"), max_length=20, help_text=_("the robot's page, the API..."))
     # The runs it ended: [{"run": id, "owner": name, "program": name}].
-    runs = models.JSONField(default=list, blank=True)
-    note = models.CharField(max_length=300, blank=True, help_text="e.g. its agent unreachable")
+    runs = models.JSONField(_("runs"), default=list, blank=True)
+    note = models.CharField(
+        _("note"), max_length=300, blank=True, help_text=_("e.g. its agent unreachable")
+    )
 
     class Meta:
+        verbose_name = _("emergency stop")
+        verbose_name_plural = _("emergency stops")
         ordering = ["-at", "-pk"]
 
     def __str__(self) -> str:
-        return f"{self.get_kind_display()} of {self.robot} by {self.username} at {self.at:%c}"
+        return gettext("%(kind)s of %(robot)s by %(user)s at %(at)s") % {
+            "kind": self.get_kind_display(),
+            "robot": self.robot,
+            "user": self.username,
+            "at": f"{self.at:%c}",
+        }
 
     @classmethod
     def pressed(cls, robot_id: int) -> "RobotStop | None":
@@ -145,13 +181,19 @@ class RobotStop(models.Model):
 class RobotButton(models.Model):
     """A manual command on the robot's page: one click runs a program with arguments."""
 
-    robot = models.ForeignKey(Robot, on_delete=models.CASCADE, related_name="buttons")
-    label = models.CharField(max_length=40)
-    program = models.ForeignKey("programs.Program", on_delete=models.CASCADE, related_name="+")
-    args = models.JSONField(default=list, blank=True)
-    position = models.PositiveSmallIntegerField(default=0)
+    robot = models.ForeignKey(
+        Robot, on_delete=models.CASCADE, related_name="buttons", verbose_name=_("robot")
+    )
+    label = models.CharField(_("label"), max_length=40)
+    program = models.ForeignKey(
+        "programs.Program", on_delete=models.CASCADE, related_name="+", verbose_name=_("program")
+    )
+    args = models.JSONField(_("arguments"), default=list, blank=True)
+    position = models.PositiveSmallIntegerField(_("position"), default=0)
 
     class Meta:
+        verbose_name = _("button")
+        verbose_name_plural = _("buttons")
         ordering = ["position", "label"]
         constraints = [
             models.UniqueConstraint(fields=["robot", "label"], name="unique_button_label")
@@ -169,33 +211,55 @@ class RobotButton(models.Model):
 class GatewayEndpoint(models.Model):
     """One more endpoint of a MAVLink robot's router: a ground station, programs, a radio."""
 
-    ROLES = [("", "added"), ("gcs", "ground stations"), ("programs", "programs on this robot")]
+    ROLES = [
+        ("", _("added")),
+        ("gcs", _("ground stations")),
+        ("programs", _("programs on this robot")),
+    ]
 
-    robot = models.ForeignKey(Robot, on_delete=models.CASCADE, related_name="endpoints")
-    type = models.CharField(max_length=10, choices=[(t, t) for t in ("udp", "tcp", "serial")])
-    mode = models.CharField(
-        max_length=10, blank=True, choices=[("server", "server (listens)"), ("client", "client")]
+    robot = models.ForeignKey(
+        Robot, on_delete=models.CASCADE, related_name="endpoints", verbose_name=_("robot")
     )
-    address = models.CharField(max_length=200, blank=True, help_text="HOST:PORT (UDP, TCP)")
-    device = models.CharField(max_length=200, blank=True, help_text="serial device path")
-    baud = models.PositiveIntegerField(null=True, blank=True)
+    type = models.CharField(
+        _("type"), max_length=10, choices=[(t, t) for t in ("udp", "tcp", "serial")]
+    )
+    mode = models.CharField(
+        _("mode"),
+        max_length=10,
+        blank=True,
+        choices=[("server", _("server (listens)")), ("client", _("client"))],
+    )
+    address = models.CharField(
+        _("address"), max_length=200, blank=True, help_text=_("HOST:PORT (UDP, TCP)")
+    )
+    device = models.CharField(
+        _("device"), max_length=200, blank=True, help_text=_("serial device path")
+    )
+    baud = models.PositiveIntegerField(_("baud"), null=True, blank=True)
     read_only = models.BooleanField(
-        default=False, help_text="Receives everything; what it sends is dropped"
+        _("read only"), default=False, help_text=_("Receives everything; what it sends is dropped")
     )
     allow = models.JSONField(
-        null=True, blank=True, help_text="Only these message ids pass (JSON list); empty: all"
+        _("allow"),
+        null=True,
+        blank=True,
+        help_text=_("Only these message ids pass (JSON list); empty: all"),
     )
-    block = models.JSONField(default=list, blank=True, help_text="These message ids never pass")
+    block = models.JSONField(
+        _("block"), default=list, blank=True, help_text=_("These message ids never pass")
+    )
     control = models.CharField(
-        max_length=10, default="always",
-        choices=[("always", "always"), ("lease", "while no program holds the robot"),
-                 ("never", "never: telemetry and reads only")],
-        help_text="May what it sends command the vehicle (arm, modes, setpoints...)",
+        _("control"), max_length=10, default="always",
+        choices=[("always", _("always")), ("lease", _("while no program holds the robot")),
+                 ("never", _("never: telemetry and reads only"))],
+        help_text=_("May what it sends command the vehicle (arm, modes, setpoints...)"),
     )  # fmt: skip
-    role = models.CharField(max_length=10, blank=True, choices=ROLES, editable=False)
-    created = models.DateTimeField(default=timezone.now, editable=False)
+    role = models.CharField(_("role"), max_length=10, blank=True, choices=ROLES, editable=False)
+    created = models.DateTimeField(_("created"), default=timezone.now, editable=False)
 
     class Meta:
+        verbose_name = _("MAVLink gateway endpoint")
+        verbose_name_plural = _("MAVLink gateway endpoints")
         ordering = ["robot", "id"]
 
     def __str__(self) -> str:
@@ -204,7 +268,7 @@ class GatewayEndpoint(models.Model):
         try:
             return f"{self.robot.name}: {describe(self.spec())}"
         except (KeyError, ValueError):
-            return f"{self.robot.name}: endpoint {self.pk}"
+            return gettext("%(robot)s: endpoint %(id)s") % {"robot": self.robot.name, "id": self.pk}
 
     def spec(self) -> dict:
         """As gateway.specs describes endpoints."""
@@ -228,28 +292,45 @@ class GatewayEndpoint(models.Model):
 class SerialBridge(models.Model):
     """A serial device of the robot shared over TCP, raw or RFC 2217 (gateway.serial_bridge)."""
 
-    robot = models.ForeignKey(Robot, on_delete=models.CASCADE, related_name="bridges")
-    device = models.CharField(
-        max_length=200, blank=True, help_text="Serial device path; empty: the robot's own"
+    robot = models.ForeignKey(
+        Robot, on_delete=models.CASCADE, related_name="bridges", verbose_name=_("robot")
     )
-    baud = models.PositiveIntegerField(default=9600)
-    address = models.CharField(max_length=200, help_text="HOST:PORT the bridge listens on")
+    device = models.CharField(
+        _("device"),
+        max_length=200,
+        blank=True,
+        help_text=_("Serial device path; empty: the robot's own"),
+    )
+    baud = models.PositiveIntegerField(_("baud"), default=9600)
+    address = models.CharField(
+        _("address"), max_length=200, help_text=_("HOST:PORT the bridge listens on")
+    )
     protocol = models.CharField(
-        max_length=10, default="raw", choices=[("raw", "raw bytes"), ("rfc2217", "RFC 2217")]
+        _("protocol"),
+        max_length=10,
+        default="raw",
+        choices=[("raw", _("raw bytes")), ("rfc2217", "RFC 2217")],
     )
     when_busy = models.CharField(
+        _("when busy"),
         max_length=10,
         default="read_only",
-        choices=[("read_only", "watch read-only"), ("refuse", "refuse")],
-        help_text="A client that comes while a program drives the robot",
+        choices=[("read_only", _("watch read-only")), ("refuse", _("refuse"))],
+        help_text=_("A client that comes while a program drives the robot"),
     )
-    created = models.DateTimeField(default=timezone.now, editable=False)
+    created = models.DateTimeField(_("created"), default=timezone.now, editable=False)
 
     class Meta:
+        verbose_name = _("serial bridge")
+        verbose_name_plural = _("serial bridges")
         ordering = ["robot", "id"]
 
     def __str__(self) -> str:
-        return f"{self.robot.name}: {self.device or 'its serial port'} on {self.address}"
+        return gettext("%(robot)s: %(device)s on %(address)s") % {
+            "robot": self.robot.name,
+            "device": self.device or gettext("its serial port"),
+            "address": self.address,
+        }
 
 
 def agent_channel(name: str) -> str:
@@ -276,4 +357,4 @@ def get_robot_for_user(user, name: str) -> Robot:
     try:
         return robots_for_user(user).get(name=name)
     except Robot.DoesNotExist:
-        raise Http404(f"No robot named {name!r}.") from None
+        raise Http404(gettext("No robot named %(name)s.") % {"name": repr(name)}) from None

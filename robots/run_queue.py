@@ -43,9 +43,10 @@ from channels.layers import get_channel_layer
 from django.conf import settings
 from django.core.exceptions import PermissionDenied
 from django.http import Http404
+from django.utils.translation import gettext as _
 
 from programs.access import get_run_for_user, runs_for_user
-from programs.models import Run, ordinal
+from programs.models import Run, in_line
 from robots.bus import RUNS_GROUP, blocking, run_group, tell_agent_sync
 from robots.lease import Holder, LeaseHeld
 from robots.models import Robot, robot_group
@@ -374,11 +375,14 @@ def queue_rows(user, robot: Robot) -> list[dict]:
         shown = manager or run.pk in visible
         moves = []
         if manager and rank > 1:
-            moves += [("⇧ first", 1, "Move to the front"), ("↑ up", rank - 1, "Move up")]
+            moves += [
+                (_("⇧ first"), 1, _("Move to the front")),
+                (_("↑ up"), rank - 1, _("Move up")),
+            ]
         if manager and rank < len(queue):
-            moves.append(("↓ down", rank + 1, "Move down"))
+            moves.append((_("↓ down"), rank + 1, _("Move down")))
         rows.append({
-            "rank": rank, "place": f"{ordinal(rank)} in line", "run": run if shown else None,
+            "rank": rank, "place": in_line(rank), "run": run if shown else None,
             "linked": run.pk in visible, "mine": run.owner_id == user.pk,
             "can_cancel": shown, "can_move": manager, "moves": moves,
         })  # fmt: skip
@@ -401,10 +405,13 @@ def cancel(run: Run) -> bool:
 def move(user, run: Run, rank: int) -> int:
     """Put a queued run at ``rank`` (1-based) of its robot's line: its rank then."""
     if not may_manage(user, run.robot):
-        raise PermissionDenied("Only staff and the robot's owner reorder its queue.")
+        raise PermissionDenied(_("Only staff and the robot's owner reorder its queue."))
     placed = Run.move_in_queue(run.pk, rank)
     if placed is None:
-        raise NotQueued(f"Run {run.pk} is not queued (it is {_state_of(run.pk)}).")
+        raise NotQueued(
+            _("Run %(id)s is not queued (it is %(state)s).")
+            % {"id": run.pk, "state": _state_of(run.pk)}
+        )
     _changed(run.robot.name)
     return placed
 
@@ -422,7 +429,8 @@ class NotQueued(Exception):
 
 
 def _state_of(run_id: int) -> str:
-    return Run.objects.filter(pk=run_id).values_list("state", flat=True).first() or "gone"
+    state = Run.objects.filter(pk=run_id).values_list("state", flat=True).first()
+    return str(Run.State(state).label) if state else _("gone")
 
 
 def _changed(robot_name: str, also=(), tell_agent: bool = True) -> None:

@@ -8,6 +8,7 @@ from channels.exceptions import ChannelFull
 from channels.layers import get_channel_layer
 from django.core.exceptions import PermissionDenied
 from django.db import transaction
+from django.utils.translation import gettext as _
 
 from programs.models import Program, Run
 from robots import run_queue
@@ -22,12 +23,14 @@ def start_run(program: Program, robot: Robot, user, args=()) -> Run:
     PermissionDenied if `user` may see the robot but not drive it."""
     if not robot.drivable_by(user):
         raise PermissionDenied(
-            f"Only {robot.get_drive_by_display()} may run programs on {robot.name}."
+            _("Only %(who)s may run programs on %(robot)s.")
+            % {"who": robot.get_drive_by_display(), "robot": robot.name}
         )
     language = program.lang
     if not language.available:
         raise RunRefused(
-            f"{language.label} is not available on this robot computer ({language.install_hint})."
+            _("%(language)s is not available on this robot computer (%(install)s).")
+            % {"language": language.label, "install": language.install_hint}
         )
     run = Run.create_for(program, robot, user, args)
     message = {
@@ -82,8 +85,11 @@ def request_stop(run: Run) -> None:
             tell_agent_sync(run.robot.name, "run.stop", run_id=run.pk)
         except Exception as exc:  # ChannelFull, or the channel layer away
             raise AgentUnreachable(
-                f"the agent of robot {run.robot.name!r} cannot be reached to stop it"
-                f" ({type(exc).__name__}); the emergency stop or its agent's restart will"
+                _(
+                    "the agent of robot %(robot)s cannot be reached to stop it (%(why)s); the"
+                    " emergency stop or its agent's restart will"
+                )
+                % {"robot": repr(run.robot.name), "why": type(exc).__name__}
             ) from exc
 
 

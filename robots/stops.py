@@ -9,6 +9,7 @@ the robot's agent could not be reached.
 import contextlib
 
 from django.core.exceptions import PermissionDenied
+from django.utils.translation import gettext as _
 
 from programs.models import Run
 from robots import run_queue
@@ -20,7 +21,8 @@ def press(user, robot: Robot, via: str) -> RobotStop:
     """The emergency stop; its record. AgentUnavailable (recorded) if the agent is away."""
     if not robot.stoppable_by(user):
         raise PermissionDenied(
-            f"Only {robot.get_estop_by_display()} may press {robot.name}'s emergency stop."
+            _("Only %(who)s may press %(robot)s's emergency stop.")
+            % {"who": robot.get_estop_by_display(), "robot": robot.name}
         )
     try:
         reply = ask_agent_sync(robot.name, "robot.estop", by=user.get_username())
@@ -41,7 +43,7 @@ def resume(user, robot: Robot, via: str) -> int:
     pressed = RobotStop.pressed(robot.pk)
     if not may_resume(user, robot, pressed):
         raise PermissionDenied(
-            "Only staff, the robot's owner or whoever pressed its emergency stop resume it."
+            _("Only staff, the robot's owner or whoever pressed its emergency stop resume it.")
         )
     if pressed is not None:
         _record(robot, "resume", user, via)

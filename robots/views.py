@@ -7,10 +7,12 @@ from django.core.exceptions import PermissionDenied
 from django.http import HttpRequest, HttpResponse
 from django.shortcuts import get_object_or_404, redirect, render
 from django.utils.http import url_has_allowed_host_and_scheme
+from django.utils.translation import gettext as _
+from django.utils.translation import ngettext
 from django.views.decorators.http import require_POST
 
 from programs.access import get_program_for_user, programs_for_user, runs_for_user
-from programs.models import Run, ordinal
+from programs.models import Run, in_line
 from robots import gateway_views, run_queue, stops
 from robots.bus import AgentUnavailable, ask_agent_sync, reconfigure_sync
 from robots.camera import has_camera
@@ -108,7 +110,8 @@ def robot_queue_move(request: HttpRequest, name: str) -> HttpResponse:
         rank = run_queue.move(request.user, run, _number(request.POST.get("to")) or 1)
     except run_queue.NotQueued as exc:
         return _queue_outcome(request, robot, error=str(exc))
-    return _queue_outcome(request, robot, info=f"Run #{run.pk} is now {ordinal(rank)} in line.")
+    info = _("Run #%(id)s is now %(place)s.") % {"id": run.pk, "place": in_line(rank)}
+    return _queue_outcome(request, robot, info=info)
 
 
 @login_required
@@ -117,7 +120,12 @@ def robot_queue_resume(request: HttpRequest, name: str) -> HttpResponse:
     """After an emergency stop, staff or the robot's owner let the queue move again."""
     robot = get_robot_for_user(request.user, name)
     count = stops.resume(request.user, robot, "the robot's page")
-    return _queue_outcome(request, robot, info=f"The queue moves again ({count} waiting).")
+    info = ngettext(
+        "The queue moves again (%(count)s waiting).",
+        "The queue moves again (%(count)s waiting).",
+        count,
+    ) % {"count": count}
+    return _queue_outcome(request, robot, info=info)
 
 
 def _queue_outcome(request, robot, info: str = "", error: str = "") -> HttpResponse:
@@ -145,14 +153,14 @@ def robot_buttons(request: HttpRequest, name: str) -> HttpResponse:
     """The robot's owner or staff set up its manual commands."""
     robot = get_robot_for_user(request.user, name)
     if not robot.configurable_by(request.user):
-        raise PermissionDenied("Only the robot's owner or staff set up its buttons.")
+        raise PermissionDenied(_("Only the robot's owner or staff set up its buttons."))
     button = None
     if "edit" in request.GET:
         button = get_object_or_404(RobotButton, robot=robot, pk=request.GET["edit"])
     form = ButtonForm(request.POST or None, instance=button, user=request.user, robot=robot)
     if request.method == "POST" and form.is_valid():
         saved = form.save()
-        messages.success(request, f"Button {saved.label!r} saved.")
+        messages.success(request, _("Button %(label)s saved.") % {"label": repr(saved.label)})
         return redirect("robot-buttons", robot.name)
     context = {"robot": robot, "form": form, "buttons": robot.buttons.select_related("program")}
     return render(request, "robots/buttons.html", context)
@@ -163,10 +171,10 @@ def robot_buttons(request: HttpRequest, name: str) -> HttpResponse:
 def robot_button_delete(request: HttpRequest, name: str, button_id: int) -> HttpResponse:
     robot = get_robot_for_user(request.user, name)
     if not robot.configurable_by(request.user):
-        raise PermissionDenied("Only the robot's owner or staff set up its buttons.")
+        raise PermissionDenied(_("Only the robot's owner or staff set up its buttons."))
     button = get_object_or_404(RobotButton, robot=robot, pk=button_id)
     button.delete()
-    messages.success(request, f"Button {button.label!r} removed.")
+    messages.success(request, _("Button %(label)s removed.") % {"label": repr(button.label)})
     return redirect("robot-buttons", robot.name)
 
 
@@ -187,7 +195,10 @@ def robot_button_press(request: HttpRequest, name: str, button_id: int) -> HttpR
     if "error" in outcome:
         messages.error(request, outcome["error"])
     else:
-        messages.success(request, f"{button.label}: run #{run.pk} sent to the robot.")
+        messages.success(
+            request,
+            _("%(label)s: run #%(id)s sent to the robot.") % {"label": button.label, "id": run.pk},
+        )
     return redirect("robot-detail", robot.name)
 
 
@@ -200,9 +211,11 @@ def robot_settings(request: HttpRequest, name: str) -> HttpResponse:
         form.save()
         reconfigure_sync(robot.name)
         if form.driver_changed:
-            messages.info(request, "Another driver: its options start from their defaults.")
+            messages.info(request, _("Another driver: its options start from their defaults."))
             return redirect("robot-settings", robot.name)
-        messages.success(request, f"Settings saved; {robot.name} is reopened with them.")
+        messages.success(
+            request, _("Settings saved; %(robot)s is reopened with them.") % {"robot": robot.name}
+        )
         return redirect("robot-detail", robot.name)
     return render(request, "robots/settings.html", {"robot": robot, "form": form})
 
@@ -221,15 +234,19 @@ def robot_estop(request: HttpRequest, name: str) -> HttpResponse:
     except AgentUnavailable as exc:
         level, text = (
             messages.ERROR,
-            f"{exc} The press is recorded; the robot's own stop is not sure.",
+            _("%(why)s The press is recorded; the robot's own stop is not sure.") % {"why": exc},
         )
     else:
         level, text = (
             messages.WARNING,
-            (
-                f"Emergency stop: {robot.name} stopped, {len(record.runs)} program(s) ended."
-                " Nothing moves it until it is resumed."
-            ),
+            ngettext(
+                "Emergency stop: %(robot)s stopped, %(count)s program(s) ended."
+                " Nothing moves it until it is resumed.",
+                "Emergency stop: %(robot)s stopped, %(count)s program(s) ended."
+                " Nothing moves it until it is resumed.",
+                len(record.runs),
+            )
+            % {"robot": robot.name, "count": len(record.runs)},
         )
     if request.htmx:  # the workbench: it stays where it is and says so
         return HttpResponse(text, status=503 if level == messages.ERROR else 200)
@@ -242,7 +259,12 @@ def robot_estop(request: HttpRequest, name: str) -> HttpResponse:
 def robot_resume(request: HttpRequest, name: str) -> HttpResponse:
     robot = get_robot_for_user(request.user, name)
     count = stops.resume(request.user, robot, "the robot's page")
-    messages.info(request, f"{robot.name} may move again ({count} run(s) waiting).")
+    said = ngettext(
+        "%(robot)s may move again (%(count)s run(s) waiting).",
+        "%(robot)s may move again (%(count)s run(s) waiting).",
+        count,
+    )
+    messages.info(request, said % {"robot": robot.name, "count": count})
     return redirect("robot-detail", robot.name)
 
 
@@ -264,7 +286,7 @@ def robot_camera(request: HttpRequest, name: str) -> HttpResponse:
     robot = get_robot_for_user(request.user, name)
     # Each frame holds a web worker while the agent renders it: never all of them.
     if not CAMERA_ASKS.acquire(blocking=False):
-        return HttpResponse("camera busy; try again", status=503, content_type="text/plain")
+        return HttpResponse(_("camera busy; try again"), status=503, content_type="text/plain")
     try:
         jpeg = ask_agent_sync(robot.name, "camera.snapshot", timeout=SNAPSHOT_TIMEOUT)["jpeg"]
     except AgentUnavailable as exc:
