@@ -322,7 +322,7 @@ def ldap_settings() -> dict:
 LDAP = ldap_settings()
 if LDAP:
     globals().update(LDAP)
-    # After the local accounts, whose backend also refuses a locked-out user name outright.
+    # After the local accounts; each refuses a locked-out sign-in (security.ThrottledBackend).
     AUTHENTICATION_BACKENDS = [*AUTHENTICATION_BACKENDS, "robotide.directory.DirectoryBackend"]
 
 
