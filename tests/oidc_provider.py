@@ -7,6 +7,7 @@ import shutil
 import subprocess
 import time
 from pathlib import Path
+from urllib.parse import urljoin
 
 import httpx
 import pytest
@@ -135,3 +136,24 @@ class Provider:
             "ROBOTIDE_OIDC_STAFF_CLAIM": "roles",
             "ROBOTIDE_OIDC_STAFF_VALUE": "staff",
         }
+
+    def sign_in_elsewhere(self, url: str, login: str, password: str) -> str | None:
+        """A browser of its own (httpx) at this provider's authorization ``url``, signing in as
+        ``login``: the URL the provider sends it back to, or None when the provider refuses
+        (asks for the sign-in again)."""
+        posted = False
+        with httpx.Client(timeout=10) as browser:
+            for _ in range(12):
+                response = browser.get(url)
+                if response.is_redirect:
+                    url = urljoin(url, response.headers["location"])
+                    if not url.startswith(self.issuer):
+                        return url
+                    continue
+                assert 'name="login"' in response.text, response.text
+                if posted:
+                    return None
+                form = {"prompt": "login", "login": login, "password": password}
+                url = urljoin(url, browser.post(url, data=form).headers["location"])
+                posted = True
+        raise AssertionError("the provider never sent the browser back")

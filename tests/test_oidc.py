@@ -3,9 +3,8 @@
 carry (state, nonce, PKCE), takeovers, and settings. The browser's side: tests/browser/test_oidc.py.
 """
 
-from urllib.parse import parse_qs, urlencode, urljoin, urlsplit
+from urllib.parse import parse_qs, urlencode, urlsplit
 
-import httpx
 import pytest
 from django.contrib.auth.models import User
 from django.core.exceptions import ImproperlyConfigured
@@ -52,27 +51,6 @@ def to_provider(client: Client) -> str:
     return response["Location"]
 
 
-def at_provider(provider, url: str, login: str, password: str) -> str | None:
-    """A browser at the provider signing in; the callback URL it is sent back with, or None
-    when the provider asks for the sign-in again (it refused)."""
-    posted = False
-    with httpx.Client(timeout=10) as browser:
-        for _ in range(12):
-            response = browser.get(url)
-            if response.is_redirect:
-                url = urljoin(url, response.headers["location"])
-                if not url.startswith(provider.issuer):
-                    return url
-                continue
-            assert 'name="login"' in response.text, response.text
-            if posted:
-                return None
-            form = {"prompt": "login", "login": login, "password": password}
-            url = urljoin(url, browser.post(url, data=form).headers["location"])
-            posted = True
-    raise AssertionError("the provider never sent the browser back")
-
-
 def callback(client: Client, url: str):
     parts = urlsplit(url)
     return client.get(parts.path, parse_qs(parts.query))
@@ -80,9 +58,8 @@ def callback(client: Client, url: str):
 
 def sign_in(provider, login: str, password: str | None = None) -> tuple[Client, object]:
     client = Client()
-    back = at_provider(
-        provider, to_provider(client), login, password or ACCOUNTS[login]["password"]
-    )
+    password = password or ACCOUNTS[login]["password"]
+    back = provider.sign_in_elsewhere(to_provider(client), login, password)
     assert back is not None, f"the provider refused {login}"
     return client, callback(client, back)
 
@@ -144,7 +121,7 @@ def test_an_account_disabled_at_the_provider_can_no_longer_sign_in(oidc):
     oidc.accounts["dora"]["disabled"] = True
     oidc.save_accounts()
     client = Client()
-    assert at_provider(oidc, to_provider(client), "dora", "dora-pass-1") is None
+    assert oidc.sign_in_elsewhere(to_provider(client), "dora", "dora-pass-1") is None
     assert signed_in_as(client) is None
 
 
@@ -179,7 +156,7 @@ def test_an_identity_is_its_sub_not_its_e_mail(oidc):
 
 def test_a_callback_with_a_wrong_state_is_refused(oidc):
     client = Client()
-    back = at_provider(oidc, to_provider(client), "ana", "ana-pass-1")
+    back = oidc.sign_in_elsewhere(to_provider(client), "ana", "ana-pass-1")
     query = parse_qs(urlsplit(back).query)
     tampered = {**query, "state": "forged-state"}
     response = client.get("/accounts/oidc/callback/", tampered)
@@ -191,7 +168,7 @@ def test_a_callback_with_a_wrong_state_is_refused(oidc):
 
 def test_a_code_taken_to_another_browser_is_refused(oidc):
     victim = Client()
-    back = at_provider(oidc, to_provider(victim), "ana", "ana-pass-1")
+    back = oidc.sign_in_elsewhere(to_provider(victim), "ana", "ana-pass-1")
     attacker = Client()
     attacker.get("/accounts/oidc/login/")  # a sign-in of its own, whose state differs
     response = callback(attacker, back)
@@ -206,7 +183,7 @@ def _stored_state(client: Client) -> tuple[str, dict]:
 
 def test_an_id_token_for_another_nonce_is_refused(oidc):
     client = Client()
-    back = at_provider(oidc, to_provider(client), "ana", "ana-pass-1")
+    back = oidc.sign_in_elsewhere(to_provider(client), "ana", "ana-pass-1")
     key, session = _stored_state(client)
     session[key]["data"]["nonce"] = "someone-elses-nonce"  # as a replayed ID token would carry
     session.save()
@@ -219,7 +196,7 @@ def test_a_code_without_its_pkce_verifier_is_refused(oidc):
     client = Client()
     authorize = to_provider(client)
     assert parse_qs(urlsplit(authorize).query)["code_challenge_method"] == ["S256"]
-    back = at_provider(oidc, authorize, "ana", "ana-pass-1")
+    back = oidc.sign_in_elsewhere(authorize, "ana", "ana-pass-1")
     key, session = _stored_state(client)
     session[key]["data"]["code_verifier"] = "x" * 64  # an intercepted code, without the verifier
     session.save()
