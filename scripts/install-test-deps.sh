@@ -22,6 +22,7 @@ have lua5.4 || need="$need lua5.4"
 have tclsh || need="$need tcl"
 ls -d /usr/share/tcltk/tcllib* >/dev/null 2>&1 || need="$need tcllib"
 have node || need="$need nodejs"
+have npm || need="$need npm"  # the OpenID Connect test provider (tests/oidc/)
 have redis-server || need="$need redis-server"
 have pg_ctlcluster || need="$need postgresql"
 # Host services for programs (say, the camera) and their tests.
@@ -30,6 +31,8 @@ have ffmpeg || need="$need ffmpeg"
 # A real directory for the LDAP sign-in tests (tests/test_ldap.py starts its own slapd).
 have slapd || need="$need slapd"
 have ldapadd || need="$need ldap-utils"
+# GNU gettext for the translation catalogs' test (tests/test_i18n.py runs makemessages).
+have msgfmt || need="$need gettext"
 if [ -n "$need" ]; then
     if [ "$(id -u)" -ne 0 ]; then
         echo "missing system packages:$need (run as root, or install them)" >&2
@@ -42,6 +45,11 @@ fi
 
 # pymavlink for the programs of the MAVLink gateway's tests.
 "$(dirname "$0")/install-program-libs.sh"
+
+# node's oidc-provider for the OpenID Connect sign-in tests, at the versions its lock file pins.
+if [ "${1:-}" != "--packages-only" ]; then
+    (cd "$(dirname "$0")/../tests/oidc" && npm ci --no-audit --no-fund --loglevel=error)
+fi
 
 # The services, as this kind of machine starts them, if they are down (not for `make fleet`,
 # which runs servers of its own: --packages-only).
