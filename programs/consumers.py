@@ -41,6 +41,8 @@ class RunConsumer(AsyncWebsocketConsumer):
     """A run's output from its first line, then live; and its state as it changes."""
 
     group: str | None = None
+    _state_task: asyncio.Task | None = None
+    _state_stale = False
 
     async def connect(self):
         run_id = self.scope["url_route"]["kwargs"]["run_id"]
@@ -83,6 +85,8 @@ class RunConsumer(AsyncWebsocketConsumer):
         return f'<div id="log-lines">{head}{render_lines(lines, self.place_of)}</div>'
 
     async def disconnect(self, code):
+        if self._state_task is not None:
+            self._state_task.cancel()
         if self.group:
             await self.channel_layer.group_discard(self.group, self.channel_name)
 
@@ -99,17 +103,30 @@ class RunConsumer(AsyncWebsocketConsumer):
                 count_lines_between, self.run.log_path, self.offset, fresh[0][0]
             )
         head = skipped_line(skipped) if skipped else ""
-        html = render_lines([(tag, text) for _, tag, text in fresh], self.place_of)
+        html = render_lines([(tag, text) for _number, tag, text in fresh], self.place_of)
         await self.send(f'<div id="log-lines" hx-swap-oob="beforeend">{head}{html}</div>')
 
     async def run_state(self, event):
+        # Read and rendered aside, so output lines queued behind a state change do not wait
+        # for a database trip (a start's first line comes right after "running").
         if self.group is None:
             return
-        self.run = await _get_run(self.scope["user"], self.run.pk)
-        if self.run is None:  # access taken away
-            await self.close()
-            return
-        await self.send_status()
+        self._state_stale = True
+        if self._state_task is None or self._state_task.done():
+            self._state_task = asyncio.create_task(self._refresh_state())
+
+    async def _refresh_state(self):
+        try:
+            while self._state_stale and self.group is not None:
+                self._state_stale = False
+                run = await _get_run(self.scope["user"], self.run.pk)
+                if run is None:  # access taken away
+                    await self.close()
+                    return
+                self.run = run
+                await self.send_status()
+        except Exception:
+            log.exception("run %s: could not send its state", self.run.pk)
 
     async def send_status(self):
         html = await database_sync_to_async(render_to_string)(

@@ -5,6 +5,7 @@ fresh reply channel). Agent -> browsers: group events that consumers turn into H
 """
 
 import asyncio
+import logging
 import threading
 
 from asgiref.sync import async_to_sync
@@ -13,6 +14,7 @@ from django.utils.translation import gettext as _
 
 from robots.models import agent_channel
 
+log = logging.getLogger(__name__)
 MANAGER_CHANNEL = "agents.manager"
 RUNS_GROUP = "runs"
 
@@ -32,6 +34,20 @@ def run_group(run_id: int) -> str:
 
 async def send_to_agent(robot_name: str, type: str, **data) -> None:
     await get_channel_layer().send(agent_channel(robot_name), {"type": type, **data})
+
+
+async def hand_over_run(robot_name: str, message: dict, consoles: str) -> None:
+    """A new run to its robot's agent, then to its owner's open workbench consoles (which
+    join its group before reading its log, so they miss no line): one trip to the loop."""
+    try:
+        await send_to_agent(robot_name, "run.start", **message)
+    finally:
+        try:
+            await get_channel_layer().group_send(
+                consoles, {"type": "console.attach", "run_id": message["run_id"]}
+            )
+        except Exception:  # the channel layer away: the agent's turn says so
+            log.warning("run %s: could not tell the consoles", message["run_id"], exc_info=True)
 
 
 async def ask_agent(robot_name: str, type: str, timeout: float = 3.0, **data) -> dict:
@@ -85,6 +101,7 @@ def blocking(coro_fn):
 
 
 tell_agent_sync = blocking(send_to_agent)
+hand_over_run_sync = blocking(hand_over_run)
 ask_agent_sync = blocking(ask_agent)
 announce_robot_sync = blocking(announce_robot)
 reconfigure_sync = blocking(reconfigure)

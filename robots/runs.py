@@ -1,21 +1,15 @@
 """Handing runs to robots: a run is data (programs.models); starting and stopping one is a
 message to its robot's agent, or a step of the robot's queue."""
 
-import logging
-
-from asgiref.sync import async_to_sync
 from channels.exceptions import ChannelFull
-from channels.layers import get_channel_layer
 from django.core.exceptions import PermissionDenied
 from django.db import transaction
 from django.utils.translation import gettext as _
 
 from programs.models import Program, Run
 from robots import run_queue
-from robots.bus import console_group, tell_agent_sync
+from robots.bus import console_group, hand_over_run_sync, tell_agent_sync
 from robots.models import Robot
-
-log = logging.getLogger(__name__)
 
 
 def start_run(program: Program, robot: Robot, user, args=()) -> Run:
@@ -46,26 +40,13 @@ def start_run(program: Program, robot: Robot, user, args=()) -> Run:
 
 
 def _hand_to_agent(run: Run, message: dict) -> None:
-    _show_in_consoles(run)
     try:
-        tell_agent_sync(run.robot.name, "run.start", **message)
+        hand_over_run_sync(run.robot.name, message, console_group(run.program_id, run.owner_id))
     except ChannelFull:
         # Nobody has taken the robot's commands for a long while: say so instead of waiting.
         fail_to_start(run, f"the agent of robot {run.robot.name!r} is not taking commands")
     except Exception as exc:  # the channel layer itself is away (Redis down)
         fail_to_start(run, f"the robot's agent cannot be reached ({type(exc).__name__})")
-
-
-def _show_in_consoles(run: Run) -> None:
-    """The owner's workbench consoles on the program, if open, follow the run from its first
-    line (programs.consumers.ConsoleConsumer) whichever way it was started."""
-    try:
-        group = console_group(run.program_id, run.owner_id)
-        async_to_sync(get_channel_layer().group_send)(
-            group, {"type": "console.attach", "run_id": run.pk}
-        )
-    except Exception:  # the channel layer away: the agent's turn says so
-        log.warning("run %s: could not tell the consoles", run.pk, exc_info=True)
 
 
 def fail_to_start(run: Run, why: str) -> None:
