@@ -122,12 +122,16 @@ class RevisionAdmin(admin.ModelAdmin):
 
 @admin.register(Share)
 class ShareAdmin(admin.ModelAdmin):
-    list_display = ["program", "target", "can_edit", "created_by", "created"]
+    list_display = ["program", "shared_with", "can_edit", "created_by", "created"]
     list_filter = ["can_edit", "everyone", "group"]
     search_fields = ["program__name", "program__owner__username", "user__username", "group__name"]
     list_select_related = ["program", "user", "group", "created_by"]
     autocomplete_fields = ["program", "user", "group"]
     readonly_fields = ["created_by", "created"]
+
+    @admin.display(description=_("shared with"))
+    def shared_with(self, share: Share) -> str:
+        return share.target
 
     def save_model(self, request, obj, form, change):
         if obj.created_by_id is None:

@@ -225,9 +225,12 @@ class Run(models.Model):
     @property
     def reason_note(self) -> str:
         """How the run ended, unless the exit code shown beside it says it all."""
-        if self.reason == f"exit status {self.exit_code}":
-            return ""
-        # Stored in English (data, like the log); the fixed wordings are shown translated.
+        return "" if self.reason == f"exit status {self.exit_code}" else self.reason_shown
+
+    @property
+    def reason_shown(self) -> str:
+        """How the run ended, for people: stored in English (data, like its log), the fixed
+        wordings shown in the reader's language."""
         return gettext(self.reason) if self.reason in FIXED_REASONS else self.reason
 
     @property

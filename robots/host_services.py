@@ -42,6 +42,7 @@ from pathlib import Path, PurePosixPath
 
 from channels.db import database_sync_to_async
 from django.conf import settings
+from django.utils.translation import gettext as _
 
 import rhal
 from robots.models import Robot
@@ -186,35 +187,45 @@ def check_speech_settings(raw) -> dict:
     if raw is None:
         return {}
     if not isinstance(raw, dict):
-        raise ValueError('speech must be an object, e.g. {"voice": "en-us", "speed": 160}')
+        raise ValueError(_('speech must be an object, e.g. {"voice": "en-us", "speed": 160}'))
     unknown = set(raw) - set(SPEECH_SETTINGS)
     if unknown:
         known = ", ".join(SPEECH_SETTINGS)
-        raise ValueError(f"unknown speech setting(s) {', '.join(sorted(unknown))}; known: {known}")
+        raise ValueError(
+            _("unknown speech setting(s) %(names)s; known: %(known)s")
+            % {"names": ", ".join(sorted(unknown)), "known": known}
+        )
     speech = dict(raw)
     if "voice" in speech and not (
         isinstance(speech["voice"], str) and _VOICE.fullmatch(speech["voice"])
     ):
         raise ValueError(
-            f"voice must be an espeak-ng voice name, e.g. en-us, not {speech['voice']!r}"
+            _("voice must be an espeak-ng voice name, e.g. en-us, not %(voice)s")
+            % {"voice": repr(speech["voice"])}
         )
     for name, low, high in (("speed", 80, 450), ("pitch", 0, 99), ("amplitude", 0, 200)):
         value = speech.get(name)
         if value is not None and (
             isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high
         ):
-            raise ValueError(f"{name} must be a whole number from {low} to {high}")
+            raise ValueError(
+                _("%(name)s must be a whole number from %(low)s to %(high)s")
+                % {"name": name, "low": low, "high": high}
+            )
     for name in ("device", "microphone"):
         value = speech.get(name)
         if name == "microphone" and isinstance(value, int) and not isinstance(value, bool):
             continue  # a device's index, as sounddevice numbers them
         if value is not None and not (isinstance(value, str) and 0 < len(value) <= 200):
-            raise ValueError(f"{name} must be a sound device's name")
+            raise ValueError(_("%(name)s must be a sound device's name") % {"name": name})
         if isinstance(value, str) and value.startswith("-"):
-            raise ValueError(f"{name} must be a sound device's name, not {value!r}")
+            raise ValueError(
+                _("%(name)s must be a sound device's name, not %(value)s")
+                % {"name": name, "value": repr(value)}
+            )
     wav = speech.get("wav")
     if wav is not None and not (isinstance(wav, str) and os.path.isabs(wav)):
-        raise ValueError("wav must be the absolute path of a file to write the speech to")
+        raise ValueError(_("wav must be the absolute path of a file to write the speech to"))
     return speech
 
 
@@ -251,7 +262,7 @@ async def speak(text: str, speech: dict) -> dict:
         stderr=asyncio.subprocess.PIPE,
     )
     try:
-        _, err = await asyncio.wait_for(process.communicate(text.encode()), SAY_TIMEOUT)
+        _out, err = await asyncio.wait_for(process.communicate(text.encode()), SAY_TIMEOUT)
     except TimeoutError:
         return {"spoken": False, "reason": f"espeak-ng was still speaking after {SAY_TIMEOUT} s"}
     finally:

@@ -4,7 +4,7 @@ from django.conf import settings as django_settings
 from django.db import models
 from django.http import Http404
 from django.utils import timezone
-from django.utils.translation import gettext
+from django.utils.translation import gettext, gettext_noop
 from django.utils.translation import gettext_lazy as _
 
 # Settings for the runs on a robot; anything else in its `settings` goes to its driver.
@@ -171,11 +171,24 @@ class RobotStop(models.Model):
             "at": f"{self.at:%c}",
         }
 
+    @property
+    def via_shown(self) -> str:
+        """Where it was pressed, for people: stored in English, shown translated."""
+        return gettext(self.via) if self.via in VIAS else self.via
+
     @classmethod
     def pressed(cls, robot_id: int) -> "RobotStop | None":
         """The robot's emergency stop in force (pressed and not resumed since), if any."""
         last = cls.objects.filter(robot_id=robot_id).first()
         return last if last is not None and last.kind == "estop" else None
+
+
+#: Where a stop or resume came from (RobotStop.via): stored in English, shown translated.
+VIAS = (
+    gettext_noop("the robot's page"),
+    gettext_noop("the workbench"),
+    gettext_noop("the API"),
+)
 
 
 class RobotButton(models.Model):

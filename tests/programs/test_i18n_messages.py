@@ -66,6 +66,18 @@ def test_api_errors_in_portuguese_and_english(api):
     assert detail(api("GET", "/api/robots/nope")) == "No robot named 'nope'."
 
 
+def test_robot_settings_errors_in_portuguese():
+    boss = User.objects.create_superuser("boss", password="pw")
+    Robot.objects.create(name="rov", url="sim://")
+    client = Client(HTTP_AUTHORIZATION=f"Bearer {ApiToken.issue(boss)[1]}", **PT)
+    body = {"settings": {"speech": {"speed": 1000}}}
+    bad = client.patch("/api/robots/rov", body, content_type="application/json")
+    assert bad.status_code == 422
+    assert detail(bad) == "configurações: speed deve ser um número inteiro de 80 a 450"
+    unknown = client.patch("/api/robots/rov", {"url": "nope://"}, content_type="application/json")
+    assert detail(unknown).startswith("não há driver de robô para 'nope://'; conhecidos: ")
+
+
 def test_api_validation_errors_in_portuguese(api):
     def messages(response) -> str:
         assert response.status_code == 422
@@ -114,10 +126,13 @@ def test_model_and_admin_labels():
         assert str(RunAdmin.stop_runs.short_description) == "Parar as execuções selecionadas"
         assert str(ProgramAdmin.shares_count.short_description) == "compartilhamentos"
         assert in_line(2) == "2º na fila"
+        assert Run(reason=Run.HELD).reason_shown.startswith("a fila está retida")
+        assert RobotStop(via="the API").via_shown == "a API"
     with translation.override("en"):
         assert str(Run.State.QUEUED.label) == "queued"
         assert str(Robot._meta.verbose_name) == "robot"
         assert in_line(2) == "2nd in line" and in_line(11) == "11th in line"
+        assert Run(reason=Run.HELD).reason_shown == Run.HELD
 
 
 def test_admin_pages_in_portuguese(alice):
@@ -144,7 +159,7 @@ def test_messages_in_portuguese(alice):
     assert "Bússola excluído." in page
 
 
-@pytest.mark.parametrize("catalog", CATALOGS, ids=lambda p: p.parts[-4])
+@pytest.mark.parametrize("catalog", CATALOGS, ids=lambda p: p.parts[-5])
 def test_catalog_is_whole_and_compiled(catalog):
     po = catalog.with_suffix(".po").read_text()
     assert "#, fuzzy" not in po
