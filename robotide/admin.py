@@ -7,8 +7,10 @@ from django.contrib.auth.models import Group
 from django.db import transaction
 from django.db.models import Count
 from django.template.response import TemplateResponse
+from django.utils.translation import gettext as _
+from django.utils.translation import gettext_lazy, ngettext
 
-from robotide.models import ApiToken, ClassTeacher, DirectoryAccount
+from robotide.models import ApiToken, ClassTeacher, DirectoryAccount, ProviderAccount
 from robotide.security import AdminLoginForm
 
 admin.site.login_form = AdminLoginForm  # throttled like the sign-in page
@@ -58,8 +60,8 @@ class TeacherInline(admin.TabularInline):
     model = ClassTeacher
     extra = 0
     autocomplete_fields = ["user"]
-    verbose_name = "teacher"
-    verbose_name_plural = "teachers"
+    verbose_name = gettext_lazy("teacher")
+    verbose_name_plural = gettext_lazy("teachers")
 
 
 class TeachingInline(admin.TabularInline):
@@ -67,8 +69,8 @@ class TeachingInline(admin.TabularInline):
     fk_name = "user"
     extra = 0
     autocomplete_fields = ["group"]
-    verbose_name = "class taught"
-    verbose_name_plural = "classes taught"
+    verbose_name = gettext_lazy("class taught")
+    verbose_name_plural = gettext_lazy("classes taught")
 
 
 admin.site.unregister(Group)
@@ -87,17 +89,21 @@ class GroupAdmin(auth_admin.GroupAdmin):
             .prefetch_related("teachers__user")
         )
 
-    @admin.display(description="members", ordering="_members")
+    @admin.display(description=gettext_lazy("members"), ordering="_members")
     def members(self, obj):
         return obj._members
 
-    @admin.display(description="teachers")
+    @admin.display(description=gettext_lazy("teachers"))
     def teacher_names(self, obj):
         return ", ".join(t.user.username for t in obj.teachers.all())
 
 
 class TakeAccessForm(forms.Form):
-    robot = forms.ModelChoiceField(queryset=None, help_text="The robot they may no longer use")
+    robot = forms.ModelChoiceField(
+        queryset=None,
+        label=gettext_lazy("Robot"),
+        help_text=gettext_lazy("The robot they may no longer use"),
+    )
 
     def __init__(self, *args, **kwargs):
         from robots.models import Robot
@@ -106,7 +112,7 @@ class TakeAccessForm(forms.Form):
         self.fields["robot"].queryset = Robot.objects.order_by("name")
 
 
-TAKE_ACCESS_EXPLANATION = (
+TAKE_ACCESS_EXPLANATION = gettext_lazy(
     "A robot is used by the members and teachers of its classes, or by everyone when it has "
     "no class. The selected users are taken out of the chosen robot's classes (as members and "
     "as teachers), which also takes away the other robots and shared programs of those "
@@ -127,18 +133,25 @@ def take_away_access(robot, users) -> str:
                 group.user_set.remove(*users)
             ClassTeacher.objects.filter(group__in=groups, user__in=ids).delete()
             names = ", ".join(g.name for g in groups)
-            done = f"Took {len(users)} user(s) out of {robot.name}'s classes ({names})."
+            done = ngettext(
+                "Took %(count)d user out of %(robot)s's classes (%(names)s).",
+                "Took %(count)d users out of %(robot)s's classes (%(names)s).",
+                len(users),
+            ) % {"count": len(users), "robot": robot.name, "names": names}
         else:
             group, _ = Group.objects.get_or_create(name=f"{robot.name}-users"[:150])
             group.user_set.add(*User.objects.exclude(pk__in=ids))
             group.user_set.remove(*users)
             robot.groups.set([group])
-            done = (
-                f"{robot.name} was open to everyone: it is now for the class {group.name}, "
-                f"every user but the {len(users)} selected."
-            )
+            done = ngettext(
+                "%(robot)s was open to everyone: it is now for the class %(class)s, every "
+                "user but the %(count)d selected.",
+                "%(robot)s was open to everyone: it is now for the class %(class)s, every "
+                "user but the %(count)d selected.",
+                len(users),
+            ) % {"robot": robot.name, "class": group.name, "count": len(users)}
     if any(u.is_superuser for u in users):
-        done += " Superusers among them still use every robot."
+        done += " " + _("Superusers among them still use every robot.")
     return done
 
 
@@ -146,22 +159,40 @@ class DirectoryAccountInline(admin.StackedInline):
     model = DirectoryAccount
     can_delete = False
     readonly_fields = ["dn", "classes", "taught", "last_sign_in"]
-    verbose_name = verbose_name_plural = "from the directory (LDAP)"
+    verbose_name = verbose_name_plural = gettext_lazy("from the directory (LDAP)")
+
+    def has_add_permission(self, request, obj=None):
+        return False
+
+
+class ProviderAccountInline(admin.StackedInline):
+    model = ProviderAccount
+    can_delete = False
+    readonly_fields = ["issuer", "subject", "classes", "taught", "last_sign_in"]
+    verbose_name = verbose_name_plural = gettext_lazy("from the OpenID Connect provider")
 
     def has_add_permission(self, request, obj=None):
         return False
 
 
 class OriginFilter(admin.SimpleListFilter):
-    title = "origin"
+    title = gettext_lazy("origin")
     parameter_name = "origin"
 
     def lookups(self, request, model_admin):
-        return [("directory", "directory (LDAP)"), ("local", "local")]
+        return [
+            ("directory", _("directory (LDAP)")),
+            ("provider", _("OpenID Connect")),
+            ("local", _("local")),
+        ]
 
     def queryset(self, request, queryset):
-        if self.value() in ("directory", "local"):
-            return queryset.filter(directory_account__isnull=self.value() == "local")
+        if self.value() == "directory":
+            return queryset.filter(directory_account__isnull=False)
+        if self.value() == "provider":
+            return queryset.filter(provider_account__isnull=False)
+        if self.value() == "local":
+            return queryset.filter(directory_account__isnull=True, provider_account__isnull=True)
         return queryset
 
 
@@ -170,17 +201,24 @@ admin.site.unregister(User)
 
 @admin.register(User)
 class UserAdmin(auth_admin.UserAdmin):
-    inlines = [*auth_admin.UserAdmin.inlines, DirectoryAccountInline, TeachingInline]
+    inlines = [
+        *auth_admin.UserAdmin.inlines,
+        DirectoryAccountInline,
+        ProviderAccountInline,
+        TeachingInline,
+    ]
     list_display = [*auth_admin.UserAdmin.list_display, "origin"]
     list_filter = [*auth_admin.UserAdmin.list_filter, OriginFilter, "teaching__group"]
-    list_select_related = ["directory_account"]
+    list_select_related = ["directory_account", "provider_account"]
     actions = ["take_robot_access"]
 
-    @admin.display(description="origin", ordering="directory_account")
+    @admin.display(description=gettext_lazy("origin"), ordering="directory_account")
     def origin(self, obj):
-        return "directory" if hasattr(obj, "directory_account") else "local"
+        if hasattr(obj, "provider_account"):
+            return _("OpenID Connect")
+        return _("directory") if hasattr(obj, "directory_account") else _("local")
 
-    @admin.action(description="Take away access to a robot…")
+    @admin.action(description=gettext_lazy("Take away access to a robot…"))
     def take_robot_access(self, request, queryset):
         def apply(form, users):
             robot = form.cleaned_data["robot"]
@@ -193,8 +231,8 @@ class UserAdmin(auth_admin.UserAdmin):
             TakeAccessForm,
             apply,
             action="take_robot_access",
-            title="Take away access to a robot",
-            submit_label="Take away access",
+            title=_("Take away access to a robot"),
+            submit_label=_("Take away access"),
             explanation=TAKE_ACCESS_EXPLANATION,
         )
 

@@ -5,6 +5,7 @@ Authenticated by the session (with CSRF) or ``Authorization: Bearer <token>``.
 
 from django.core.exceptions import PermissionDenied
 from django.http import Http404, JsonResponse
+from django.utils.translation import gettext as _
 from django.views import defaults
 from ninja import NinjaAPI
 from ninja.errors import AuthenticationError, HttpError
@@ -103,17 +104,17 @@ api.add_router("/tokens", tokens_router)
 
 @api.exception_handler(Http404)
 def not_found(request, exc):
-    return api.create_response(request, {"detail": str(exc) or "Not found."}, status=404)
+    return api.create_response(request, {"detail": str(exc) or _("Not found.")}, status=404)
 
 
 @api.exception_handler(PermissionDenied)
 def forbidden(request, exc):
-    return api.create_response(request, {"detail": str(exc) or "Not allowed."}, status=403)
+    return api.create_response(request, {"detail": str(exc) or _("Not allowed.")}, status=403)
 
 
 @api.exception_handler(AuthenticationError)
 def unauthorized(request, exc):
-    detail = "Authentication required: sign in or send Authorization: Bearer <token>."
+    detail = _("Authentication required: sign in or send Authorization: Bearer <token>.")
     return api.create_response(request, {"detail": detail}, status=401)
 
 
@@ -134,5 +135,5 @@ __all__ = ["api", "HttpError", "page_not_found"]
 def page_not_found(request, exception):
     """Django's 404 page, or JSON under /api/ (a path no route matches, e.g. /api/runs/x)."""
     if request.path.startswith("/api/"):
-        return JsonResponse({"detail": "Not found."}, status=404)
+        return JsonResponse({"detail": _("Not found.")}, status=404)
     return defaults.page_not_found(request, exception)

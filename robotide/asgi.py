@@ -21,6 +21,7 @@ from channels.security.websocket import AllowedHostsOriginValidator  # noqa: E40
 from django.urls import path, re_path  # noqa: E402
 
 from programs.consumers import ConsoleConsumer, RunConsumer, RunListConsumer  # noqa: E402
+from robotide.language import WebsocketLanguage  # noqa: E402
 from robotide.security import SameOriginWebsocket  # noqa: E402
 from robotide.served_by import ServedBy  # noqa: E402
 from robots.camera import CameraStream  # noqa: E402
@@ -43,7 +44,9 @@ application = ServedBy(
         {
             "http": URLRouter(http_urlpatterns),
             "websocket": SameOriginWebsocket(
-                AllowedHostsOriginValidator(AuthMiddlewareStack(URLRouter(websocket_urlpatterns)))
+                AllowedHostsOriginValidator(
+                    AuthMiddlewareStack(WebsocketLanguage(URLRouter(websocket_urlpatterns)))
+                )
             ),
         }
     )

@@ -41,3 +41,39 @@ def stored_language(user) -> str | None:
         return None
     code = LanguagePreference.objects.filter(user=user).values_list("language", flat=True).first()
     return code if supported(code) else None
+
+
+def language_from_headers(headers: dict[str, str]) -> str:
+    """The switcher's cookie, else the best of Accept-Language, else the default: as
+    LocaleMiddleware chooses for a page, for a websocket that has no HttpRequest."""
+    from http.cookies import SimpleCookie
+
+    cookie = SimpleCookie()
+    cookie.load(headers.get("cookie", ""))
+    morsel = cookie.get(settings.LANGUAGE_COOKIE_NAME)
+    candidates = [morsel.value] if morsel else []
+    accept = headers.get("accept-language", "")
+    candidates += [lang for lang, _q in translation.trans_real.parse_accept_lang_header(accept)]
+    for code in candidates:
+        try:
+            return translation.get_supported_language_variant(code)
+        except LookupError:
+            continue
+    return translation.get_supported_language_variant(settings.LANGUAGE_CODE)
+
+
+class WebsocketLanguage:
+    """A websocket's fragments in its page's language: the account's, else the browser's. Inside
+    AuthMiddlewareStack (it needs scope["user"]); activated for the connection's whole task."""
+
+    def __init__(self, inner):
+        self.inner = inner
+
+    async def __call__(self, scope, receive, send):
+        from channels.db import database_sync_to_async
+
+        headers = {k.decode("latin-1"): v.decode("latin-1") for k, v in scope.get("headers", [])}
+        user = scope.get("user")
+        stored = await database_sync_to_async(stored_language)(user) if user else None
+        translation.activate(stored or language_from_headers(headers))
+        return await self.inner(scope, receive, send)

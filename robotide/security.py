@@ -36,6 +36,9 @@ from django.core.exceptions import (
 )
 from django.dispatch import receiver
 from django.http import HttpResponse, JsonResponse
+from django.utils import translation
+from django.utils.translation import gettext as _
+from django.utils.translation import ngettext
 from django.views import defaults
 
 # -- Content Security Policy ----------------------------------------------------------------------
@@ -103,23 +106,38 @@ class RequestSizeLimitMiddleware:
 def request_too_large(request) -> HttpResponse:
     from programs.models import MAX_SOURCE_BYTES
 
-    detail = (
-        f"Request too large: at most {settings.MAX_REQUEST_BYTES // 1024} KB "
-        f"(a program may be {MAX_SOURCE_BYTES // 1024} KB)."
-    )
+    with _request_language(request):
+        detail = _("Request too large: at most %(most)s KB (a program may be %(program)s KB).") % {
+            "most": settings.MAX_REQUEST_BYTES // 1024,
+            "program": MAX_SOURCE_BYTES // 1024,
+        }
     return _refusal(request, detail, 413)
+
+
+def _request_language(request):
+    # Refusals come before LocaleMiddleware has run: the cookie's or browser's language.
+    return translation.override(translation.get_language_from_request(request))
 
 
 def bad_request(request, exception):
     """Django's 400 page, or what was too much when a body was too large to read."""
     limits = {
-        RequestDataTooBig: f"form data over {settings.DATA_UPLOAD_MAX_MEMORY_SIZE // 1024} KB",
-        TooManyFieldsSent: f"more than {settings.DATA_UPLOAD_MAX_NUMBER_FIELDS} fields",
-        TooManyFilesSent: f"more than {settings.DATA_UPLOAD_MAX_NUMBER_FILES} files",
+        RequestDataTooBig: (
+            _("Request refused: form data over %(count)s KB."),
+            settings.DATA_UPLOAD_MAX_MEMORY_SIZE // 1024,
+        ),
+        TooManyFieldsSent: (
+            _("Request refused: more than %(count)s fields."),
+            settings.DATA_UPLOAD_MAX_NUMBER_FIELDS,
+        ),
+        TooManyFilesSent: (
+            _("Request refused: more than %(count)s files."),
+            settings.DATA_UPLOAD_MAX_NUMBER_FILES,
+        ),
     }
-    for kind, what in limits.items():
+    for kind, (message, count) in limits.items():
         if isinstance(exception, kind):
-            return _refusal(request, f"Request refused: {what}.", 400)
+            return _refusal(request, message % {"count": count}, 400)
     return defaults.bad_request(request, exception)
 
 
@@ -241,11 +259,11 @@ class ThrottledModelBackend(ThrottledBackend, ModelBackend):
 
 def throttled_message(seconds: int) -> str:
     if seconds < 60:
-        wait = f"{seconds} second{'s' if seconds != 1 else ''}"
+        wait = ngettext("%(count)d second", "%(count)d seconds", seconds) % {"count": seconds}
     else:
         minutes = math.ceil(seconds / 60)
-        wait = f"{minutes} minute{'s' if minutes != 1 else ''}"
-    return f"Too many failed sign-ins; try again in {wait}."
+        wait = ngettext("%(count)d minute", "%(count)d minutes", minutes) % {"count": minutes}
+    return _("Too many failed sign-ins; try again in %(wait)s.") % {"wait": wait}
 
 
 class ThrottledLoginMixin:

@@ -4,6 +4,9 @@ from django import forms
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.shortcuts import get_object_or_404, redirect, render
+from django.utils.formats import date_format
+from django.utils.translation import gettext as _
+from django.utils.translation import gettext_lazy
 from django.views.decorators.cache import never_cache
 from django.views.decorators.http import require_POST
 
@@ -14,7 +17,10 @@ NEW_TOKEN_KEY = "account_new_token"
 
 class TokenForm(forms.Form):
     name = forms.CharField(
-        max_length=100, required=False, help_text="What it is for, e.g. “laptop” or “CI”"
+        label=gettext_lazy("Name"),
+        max_length=100,
+        required=False,
+        help_text=gettext_lazy("What it is for, e.g. “laptop” or “CI”"),
     )
 
 
@@ -46,7 +52,8 @@ def account(request):
 @require_POST
 def token_revoke(request, token_id: int):
     token = get_object_or_404(ApiToken, pk=token_id, user=request.user)
-    label = token.name or f"created {token.created:%Y-%m-%d %H:%M}"
+    created = date_format(token.created, "SHORT_DATETIME_FORMAT", use_l10n=True)
+    label = token.name or _("created %(when)s") % {"when": created}
     token.delete()
-    messages.success(request, f"Token {label} revoked: it no longer works.")
+    messages.success(request, _("Token %(label)s revoked: it no longer works.") % {"label": label})
     return redirect("account")

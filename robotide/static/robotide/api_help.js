@@ -157,15 +157,15 @@
       var list = element("dl", "api-help-params");
       call.params.forEach(function (p) {
         list.appendChild(element("dt", "", p.name));
-        var text = (p.unit ? p.unit + " · " : "") + p.meaning + (p.default !== null ? " (default: " + p.default + ")" : "");
+        var text = (p.unit ? p.unit + " · " : "") + p.meaning + (p.default !== null ? " " + interpolate(gettext("(default: %(default)s)"), {default: p.default}, true) : "");
         list.appendChild(element("dd", "", text));
       });
       node.appendChild(list);
     }
-    node.appendChild(element("p", "api-help-returns", "Returns " + call.returns + "."));
+    node.appendChild(element("p", "api-help-returns", interpolate(gettext("Returns %(returns)s."), {returns: call.returns}, true)));
     node.appendChild(element("p", "api-help-doc", call.doc));
     if (call.note) node.appendChild(element("p", "api-help-note", help.label + ": " + call.note + "."));
-    var example = element("p", "api-help-example", "Example: ");
+    var example = element("p", "api-help-example", gettext("Example:") + " ");
     example.appendChild(element("code", "", call.example));
     node.appendChild(example);
   }

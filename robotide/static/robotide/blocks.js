@@ -32,16 +32,16 @@
   var MESSAGES_HUE = 290;
 
   var SENSORS = [
-    ["range (m)", "range"],
-    ["heading (degrees)", "heading"],
-    ["bumper pressed", "bumper"],
-    ["position x (m)", "position.x"],
-    ["position y (m)", "position.y"],
-    ["position angle (rad)", "position.theta"],
-    ["speed (m/s)", "velocity.linear"],
-    ["turning speed (rad/s)", "velocity.angular"],
-    ["distance travelled (m)", "odometry.distance"],
-    ["battery (%)", "battery"],
+    [gettext("range (m)"), "range"],
+    [gettext("heading (degrees)"), "heading"],
+    [gettext("bumper pressed"), "bumper"],
+    [gettext("position x (m)"), "position.x"],
+    [gettext("position y (m)"), "position.y"],
+    [gettext("position angle (rad)"), "position.theta"],
+    [gettext("speed (m/s)"), "velocity.linear"],
+    [gettext("turning speed (rad/s)"), "velocity.angular"],
+    [gettext("distance travelled (m)"), "odometry.distance"],
+    [gettext("battery (%)"), "battery"],
   ];
 
   function statement(block) {
@@ -60,110 +60,107 @@
   var BLOCKS = [
     statement({
       type: "robot_drive",
-      message0: "drive at %1 m/s, turning at %2 rad/s",
+      message0: gettext("drive at %1 m/s, turning at %2 rad/s"),
       args0: [
         {type: "input_value", name: "LINEAR", check: "Number"},
         {type: "input_value", name: "ANGULAR", check: "Number"},
       ],
       colour: ROBOT_HUE,
-      tooltip: "Drive on at this speed (m/s, negative: backwards), turning at this rate " +
-               "(rad/s, positive: to the left), until told otherwise.",
+      tooltip: gettext("Drive on at this speed (m/s, negative: backwards), turning at this rate (rad/s, positive: to the left), until told otherwise."),
     }),
     statement({
       type: "robot_stop",
-      message0: "stop",
+      message0: gettext("stop"),
       colour: ROBOT_HUE,
-      tooltip: "Stop the motors.",
+      tooltip: gettext("Stop the motors."),
     }),
     statement({
       type: "robot_forward",
-      message0: "forward for %1 seconds at %2 m/s",
+      message0: gettext("forward for %1 seconds at %2 m/s"),
       args0: [
         {type: "input_value", name: "SECONDS", check: "Number"},
         {type: "input_value", name: "SPEED", check: "Number"},
       ],
       colour: ROBOT_HUE,
-      tooltip: "Drive straight ahead for this many seconds, then stop.",
+      tooltip: gettext("Drive straight ahead for this many seconds, then stop."),
     }),
     statement({
       type: "robot_turn",
-      message0: "turn %1 by %2 degrees",
+      message0: gettext("turn %1 by %2 degrees"),
       args0: [
-        {type: "field_dropdown", name: "DIRECTION", options: [["left", "LEFT"], ["right", "RIGHT"]]},
+        {type: "field_dropdown", name: "DIRECTION", options: [[gettext("left"), "LEFT"], [gettext("right"), "RIGHT"]]},
         {type: "input_value", name: "DEGREES", check: "Number"},
       ],
       colour: ROBOT_HUE,
-      tooltip: "Turn on the spot by this angle, timed at the robot's turning speed, then stop.",
+      tooltip: gettext("Turn on the spot by this angle, timed at the robot's turning speed, then stop."),
     }),
     statement({
       type: "robot_wait",
-      message0: "wait %1 seconds",
+      message0: gettext("wait %1 seconds"),
       args0: [{type: "input_value", name: "SECONDS", check: "Number"}],
       colour: ROBOT_HUE,
-      tooltip: "Wait this many seconds; the robot keeps doing what it was doing.",
+      tooltip: gettext("Wait this many seconds; the robot keeps doing what it was doing."),
     }),
     statement({
       type: "robot_show",
-      message0: "show %1 as %2",
+      message0: gettext("show %1 as %2"),
       args0: [
         {type: "input_value", name: "VALUE"},
         {type: "field_input", name: "NAME", text: "value"},
       ],
       colour: ROBOT_HUE,
-      tooltip: "Show a number or a text under this name on the robot's page.",
+      tooltip: gettext("Show a number or a text under this name on the robot's page."),
     }),
     statement({
       type: "robot_say",
-      message0: "say %1",
+      message0: gettext("say %1"),
       args0: [{type: "input_value", name: "TEXT"}],
       colour: ROBOT_HUE,
-      tooltip: "Speak this aloud on the robot's computer (and show it on the robot's page).",
+      tooltip: gettext("Speak this aloud on the robot's computer (and show it on the robot's page)."),
     }),
     value({
       type: "robot_sensor",
-      message0: "sensor %1",
+      message0: gettext("sensor %1"),
       args0: [{type: "field_dropdown", name: "SENSOR", options: SENSORS}],
       colour: SENSORS_HUE,
-      tooltip: "What this sensor of the robot reads now. A robot without it stops the " +
-               "program with an error that says so.",
+      tooltip: gettext("What this sensor of the robot reads now. A robot without it stops the program with an error that says so."),
     }),
     statement({
       type: "robot_publish",
-      message0: "send %1 on topic %2",
+      message0: gettext("send %1 on topic %2"),
       args0: [
         {type: "input_value", name: "VALUE"},
         {type: "field_input", name: "TOPIC", text: "news"},
       ],
       colour: MESSAGES_HUE,
-      tooltip: "Send this value to the programs on this robot that receive on this topic.",
+      tooltip: gettext("Send this value to the programs on this robot that receive on this topic."),
     }),
     value({
       type: "robot_receive",
-      message0: "next message on topic %1, waiting up to %2 seconds",
+      message0: gettext("next message on topic %1, waiting up to %2 seconds"),
       args0: [
         {type: "field_input", name: "TOPIC", text: "news"},
         {type: "input_value", name: "TIMEOUT", check: "Number"},
       ],
       colour: MESSAGES_HUE,
-      tooltip: "The next value sent on this topic since the program started; " +
-               "null if none comes in time (empty: wait for ever).",
+      tooltip: gettext("The next value sent on this topic since the program started; null if none comes in time (empty: wait for ever)."),
     }),
     statement({
       type: "robot_memory_set",
-      message0: "remember %1 as %2",
+      message0: gettext("remember %1 as %2"),
       args0: [
         {type: "input_value", name: "VALUE"},
         {type: "field_input", name: "KEY", text: "laps"},
       ],
       colour: MESSAGES_HUE,
-      tooltip: "Keep this value under this name, in the memory the robot's programs share.",
+      tooltip: gettext("Keep this value under this name, in the memory the robot's programs share."),
     }),
     value({
       type: "robot_memory_get",
-      message0: "remembered %1",
+      message0: gettext("remembered %1"),
       args0: [{type: "field_input", name: "KEY", text: "laps"}],
       colour: MESSAGES_HUE,
-      tooltip: "The value kept under this name in the robot's shared memory, or null.",
+      tooltip: gettext("The value kept under this name in the robot's shared memory, or null."),
     }),
   ];
 
@@ -184,7 +181,7 @@
   var TOOLBOX = {
     kind: "categoryToolbox",
     contents: [
-      {kind: "category", name: "Robot", colour: ROBOT_HUE, contents: [
+      {kind: "category", name: gettext("Robot"), colour: ROBOT_HUE, contents: [
         block("robot_forward", {inputs: {SECONDS: number(1), SPEED: number(0.2)}}),
         block("robot_turn", {fields: {DIRECTION: "LEFT"}, inputs: {DEGREES: number(90)}}),
         block("robot_drive", {inputs: {LINEAR: number(0.2), ANGULAR: number(0)}}),
@@ -195,13 +192,13 @@
                                                       fields: {SENSOR: "range"}}}},
                              fields: {NAME: "range"}}),
       ]},
-      {kind: "category", name: "Sensors", colour: SENSORS_HUE, contents: [
+      {kind: "category", name: gettext("Sensors"), colour: SENSORS_HUE, contents: [
         block("robot_sensor", {fields: {SENSOR: "range"}}),
         block("robot_sensor", {fields: {SENSOR: "heading"}}),
         block("robot_sensor", {fields: {SENSOR: "bumper"}}),
         block("robot_sensor", {fields: {SENSOR: "position.x"}}),
       ]},
-      {kind: "category", name: "Logic", categorystyle: "logic_category", contents: [
+      {kind: "category", name: gettext("Logic"), categorystyle: "logic_category", contents: [
         block("controls_if"),
         block("controls_if", {extraState: {hasElse: true}}),
         block("logic_compare", {inputs: {B: number(0.4)}}),
@@ -210,26 +207,26 @@
         block("logic_boolean"),
         block("logic_null"),
       ]},
-      {kind: "category", name: "Loops", categorystyle: "loop_category", contents: [
+      {kind: "category", name: gettext("Loops"), categorystyle: "loop_category", contents: [
         block("controls_repeat_ext", {inputs: {TIMES: number(4)}}),
         block("controls_whileUntil"),
         block("controls_for", {inputs: {FROM: number(1), TO: number(10), BY: number(1)}}),
         block("controls_flow_statements"),
       ]},
-      {kind: "category", name: "Math", categorystyle: "math_category", contents: [
+      {kind: "category", name: gettext("Math"), categorystyle: "math_category", contents: [
         block("math_number", {fields: {NUM: 0}}),
         block("math_arithmetic", {inputs: {A: number(1), B: number(1)}}),
         block("math_random_int", {inputs: {FROM: number(1), TO: number(100)}}),
         block("math_round", {inputs: {NUM: number(3.1)}}),
       ]},
-      {kind: "category", name: "Text", categorystyle: "text_category", contents: [
+      {kind: "category", name: gettext("Text"), categorystyle: "text_category", contents: [
         block("text"),
         block("text_join"),
         block("text_print", {inputs: {TEXT: text("hello")}}),
       ]},
-      {kind: "category", name: "Variables", categorystyle: "variable_category",
+      {kind: "category", name: gettext("Variables"), categorystyle: "variable_category",
        custom: "VARIABLE"},
-      {kind: "category", name: "Messages", colour: MESSAGES_HUE, contents: [
+      {kind: "category", name: gettext("Messages"), colour: MESSAGES_HUE, contents: [
         block("robot_publish", {inputs: {VALUE: text("hello")}}),
         block("robot_receive", {inputs: {TIMEOUT: number(5)}}),
         block("robot_memory_set", {inputs: {VALUE: number(0)}}),
@@ -250,7 +247,7 @@
       try {
         state = JSON.parse(jsonText);
       } catch (error) {
-        throw new Error("This program is not blocks (Blockly's JSON): " + error.message);
+        throw new Error(interpolate(gettext("This program is not blocks (Blockly's JSON): %(error)s"), {error: error.message}, true));
       }
     }
     Blockly.serialization.workspaces.load(state, workspace);

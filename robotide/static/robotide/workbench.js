@@ -38,7 +38,7 @@
       stateNote.textContent = message;
       stateNote.dataset.kind = kind || "";
     }
-    function showDirty() { if (dirty()) say("Unsaved changes", "dirty"); else if (stateNote.dataset.kind === "dirty") say("Saved", "saved"); }
+    function showDirty() { if (dirty()) say(gettext("Unsaved changes"), "dirty"); else if (stateNote.dataset.kind === "dirty") say(gettext("Saved"), "saved"); }
     if (editor) editor.on("change", showDirty); else textarea.addEventListener("input", showDirty);
     if (language) language.addEventListener("change", showDirty);
 
@@ -62,8 +62,8 @@
       }
       if (response.status === 409) return response.json().then(function (answer) { showConflict(answer); return true; });
       if (!response.ok) {
-        return response.json().then(function (answer) { say(answer.error || "Failed", "error"); return true; },
-          function () { say("The server answered " + response.status, "error"); return true; });
+        return response.json().then(function (answer) { say(answer.error || gettext("Failed"), "error"); return true; },
+          function () { say(interpolate(gettext("The server answered %(status)s"), {status: response.status}, true), "error"); return true; });
       }
       return Promise.resolve(false);
     }
@@ -73,16 +73,16 @@
       if (revision) {
         base.value = revision;
         var note = document.getElementById("revision-note");
-        if (note) note.textContent = "revision " + revision + ", just now";
+        if (note) note.textContent = interpolate(gettext("revision %(revision)s, just now"), {revision: revision}, true);
       }
       conflictBox.hidden = true;
-      say(revision ? "Saved (revision " + revision + ")" : "Saved", "saved");
+      say(revision ? interpolate(gettext("Saved (revision %(revision)s)"), {revision: revision}, true) : gettext("Saved"), "saved");
     }
 
     function save() {
       if (!canEdit || busy) return Promise.resolve(false);
       busy = true;
-      say("Saving…", "busy");
+      say(gettext("Saving…"), "busy");
       return post(form.dataset.saveUrl, "save").then(function (response) {
         return trouble(response).then(function (failed) {
           if (failed) return false;
@@ -94,23 +94,24 @@
     function run() {
       if (busy) return;
       busy = true;
-      say(canEdit ? "Saving and starting…" : "Starting…", "busy");
+      say(canEdit ? gettext("Saving and starting…") : gettext("Starting…"), "busy");
       post(form.dataset.startUrl, "run").then(function (response) {
         return trouble(response).then(function (failed) {
           if (failed) return;
           if (canEdit) saveAnswered(response.headers.get("X-Revision"));
-          else say("Started", "saved");
+          else say(gettext("Started"), "saved");
           var id = response.headers.get("X-Run");
           return response.text().then(function (html) { showRun(id, html); });
         });
       }, offline).finally(function () { busy = false; });
     }
 
-    function offline() { say("Not sent: the server cannot be reached. Your text is still here.", "error"); return false; }
+    function offline() { say(gettext("Not sent: the server cannot be reached. Your text is still here."), "error"); return false; }
 
     function signedOut() {
       say("", "error");
-      stateNote.innerHTML = 'Your sign-in has expired; your text is kept here. <a href="/accounts/login/?next=/" target="_blank" rel="noopener">Sign in again</a> (a new tab), then come back: it is saved then.';
+      // The translation is ours (the catalog), not user input: safe as HTML.
+      stateNote.innerHTML = gettext('Your sign-in has expired; your text is kept here. <a href="/accounts/login/?next=/" target="_blank" rel="noopener">Sign in again</a> (a new tab), then come back: it is saved then.');
       window.addEventListener("focus", function retry() {
         window.removeEventListener("focus", retry);
         save();
@@ -118,17 +119,17 @@
     }
 
     function showConflict(answer) {
-      say("Not saved: someone saved revision " + answer.revision + " since you opened it", "error");
+      say(interpolate(gettext("Not saved: someone saved revision %(revision)s since you opened it"), {revision: answer.revision}, true), "error");
       conflictBox.hidden = false;
       conflictBox.textContent = "";
       var note = document.createElement("p");
-      note.textContent = "Revision " + answer.revision + " was saved after you opened this program. Nothing was overwritten. What differs from it:";
+      note.textContent = interpolate(gettext("Revision %(revision)s was saved after you opened this program. Nothing was overwritten. What differs from it:"), {revision: answer.revision}, true);
       var diff = document.createElement("pre");
       diff.className = "diff";
       diff.textContent = answer.diff;
       var keep = document.createElement("button");
       keep.type = "button";
-      keep.textContent = "Save mine over it";
+      keep.textContent = gettext("Save mine over it");
       keep.addEventListener("click", function () { base.value = answer.revision; save(); });
       conflictBox.append(note, diff, keep);
     }
@@ -159,7 +160,7 @@
         var line = Number(element.dataset.line);
         element.setAttribute("role", "link");
         element.tabIndex = 0;
-        element.title = "Go to line " + line + " of the program";
+        element.title = interpolate(gettext("Go to line %(line)s of the program"), {line: line}, true);
         element.addEventListener("click", function () { goToLine(line); });
         element.addEventListener("keydown", function (event) { if (event.key === "Enter") goToLine(line); });
       });
@@ -199,11 +200,11 @@
 
     function stop() {
       if (!current || !runOngoing()) return;
-      say("Stopping…", "busy");
+      say(gettext("Stopping…"), "busy");
       fetch(current.dataset.stopUrl, {
         method: "POST", credentials: "same-origin", redirect: "manual",
         headers: { "X-CSRFToken": cookie("csrftoken"), "HX-Request": "true" },
-      }).then(function (response) { trouble(response).then(function (failed) { if (!failed) say("Stopped", "saved"); }); }, offline);
+      }).then(function (response) { trouble(response).then(function (failed) { if (!failed) say(gettext("Stopped"), "saved"); }); }, offline);
     }
 
     function estop() {
@@ -214,7 +215,7 @@
         headers: { "X-CSRFToken": cookie("csrftoken"), "HX-Request": "true" },
       }).then(function (response) {
         if (response.type === "opaqueredirect") { signedOut(); return; }
-        response.text().then(function (text) { say(text || "Emergency stop: " + response.status, "error"); });
+        response.text().then(function (text) { say(text || interpolate(gettext("Emergency stop: %(status)s"), {status: response.status}, true), "error"); });
       }, offline);
     }
 
@@ -293,7 +294,7 @@
         drafted = snapshot();
         offer.remove();
         showDirty();
-        say("Draft restored: not saved yet", "dirty");
+        say(gettext("Draft restored: not saved yet"), "dirty");
       });
       discard.addEventListener("click", function () {
         var data = new FormData();
@@ -326,7 +327,7 @@
     toggle.addEventListener("click", function () {
       var open = toggle.getAttribute("aria-expanded") !== "true";
       toggle.setAttribute("aria-expanded", String(open));
-      toggle.textContent = open ? "Hide the robot" : "Show the robot";
+      toggle.textContent = open ? gettext("Hide the robot") : gettext("Show the robot");
       document.querySelector(".workbench").classList.toggle("panel-closed", !open);
       loadPanel();
     });
