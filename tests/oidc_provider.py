@@ -83,6 +83,9 @@ class Provider:
         node = shutil.which("node")
         if not node:
             _unavailable("node is not installed (Debian: nodejs npm)")
+        version = subprocess.run([node, "--version"], capture_output=True, text=True).stdout
+        if int(version.lstrip("v").split(".")[0] or 0) < 20:
+            _unavailable(f"oidc-provider 9 needs Node.js 20 or later, not {version.strip()}")
         if not (HERE / "node_modules" / "oidc-provider").exists():
             npm = shutil.which("npm") or _unavailable("npm is not installed (Debian: npm)")
             subprocess.run([npm, "ci", "--no-audit", "--no-fund"], cwd=HERE, check=True)

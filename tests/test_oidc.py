@@ -44,9 +44,9 @@ def oidc(provider, settings, monkeypatch):
     return provider
 
 
-def to_provider(client: Client) -> str:
+def to_provider(client: Client, query: str = "") -> str:
     """Starts a sign-in: the provider's authorization URL robotide sends the browser to."""
-    response = client.get("/accounts/oidc/login/")
+    response = client.get(f"/accounts/oidc/login/{query}")
     assert response.status_code == 302, response.content
     return response["Location"]
 
@@ -84,6 +84,14 @@ def test_a_student_signs_in_with_their_class_and_the_examples(oidc):
     assert (account.issuer, account.subject) == (oidc.issuer, "ana")
     names = set(Program.objects.filter(owner=ana).values_list("name", flat=True))
     assert names == set(EXAMPLES.values())
+
+
+def test_the_page_asked_for_comes_next_if_it_is_here(oidc):
+    for asked, comes in [("/runs/", "/runs/"), ("https://evil.test/", "/programs/")]:
+        client = Client()
+        start = to_provider(client, "?" + urlencode({"next": asked}))
+        response = callback(client, oidc.sign_in_elsewhere(start, "ana", "ana-pass-1"))
+        assert response["Location"] == comes
 
 
 def test_the_teacher_teaches_the_class_and_staff_is_staff(oidc):
