@@ -191,6 +191,14 @@ def _values(claims: dict, name: str) -> set[str]:
     return set()
 
 
+def _classes(claims: dict, config: dict) -> tuple[set[str], bool]:
+    """The classes the claims name, and whether their teacher (or else a member)."""
+    named = _values(claims, config["classes_claim"])
+    classes = {c for c in named if fnmatch.fnmatchcase(c, config["class_pattern"])}
+    teacher_claim, teacher_value = config["teacher"]
+    return classes, teacher_value in _values(claims, teacher_claim)
+
+
 class ProviderBackend(ModelBackend):
     """Signs in the account of a checked identity; called by ``callback`` alone."""
 
@@ -213,13 +221,7 @@ class ProviderBackend(ModelBackend):
             self._update(user, claims, config)
             account = account or ProviderAccount(user=user, issuer=issuer, subject=claims["sub"])
             account.last_sign_in = timezone.now()
-            classes = {
-                c
-                for c in _values(claims, config["classes_claim"])
-                if fnmatch.fnmatchcase(c, config["class_pattern"])
-            }
-            teacher_claim, teacher_value = config["teacher"]
-            account.sync_classes(classes, teaches=teacher_value in _values(claims, teacher_claim))
+            account.sync_classes(*_classes(claims, config))
         return user
 
     def _new_user(self, claims: dict, config: dict):
