@@ -55,11 +55,14 @@ def at_provider(page: Page, provider, login: str) -> None:
     page.get_by_role("button", name="Sign-in").click()
 
 
+def with_axe(page: Page) -> None:
+    """axe-core at AXE_URL, answered by the test (tests/browser/test_accessibility.py)."""
+    page.route(f"**{AXE_URL}", lambda r: r.fulfill(path=AXE, content_type="text/javascript"))
+
+
 def test_the_sign_in_page_with_the_button_passes_axe(new_page, screenshot):
     page = new_page()
-    page.route(
-        f"**{AXE_URL}", lambda route: route.fulfill(path=AXE, content_type="text/javascript")
-    )
+    with_axe(page)
     page.goto("/accounts/login/")
     expect(page.get_by_role("link", name=BUTTON)).to_be_visible()
     screenshot(page, "oidc-sign-in")
@@ -122,5 +125,7 @@ def test_a_callback_this_browser_did_not_ask_for_is_refused(
         expect(page.get_by_text(refusal)).to_be_visible()
         expect(page.get_by_role("button", name="Sign out")).to_have_count(0)
     screenshot(page, "oidc-refused")
+    with_axe(page)
+    assert axe_violations(page) == []
     page.goto("/programs/")
     expect(page).to_have_url(re.compile("/accounts/login/"))
