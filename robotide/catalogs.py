@@ -67,7 +67,14 @@ def make_messages(root: Path, locale: str, *, skip: list[str] = ()) -> None:
         os.chdir(cwd)
 
 
-def update_root_catalogs(locale: str = "pt_BR") -> None:
+def translated_locales() -> list[str]:
+    """The locales (pt_BR) of settings.LANGUAGES that need catalogs: all but English."""
+    from django.utils.translation import to_locale
+
+    return [to_locale(code) for code, _name in settings.LANGUAGES if code != "en"]
+
+
+def update_root_catalogs(locale: str) -> None:
     """`make messages`: the root's catalogs, made and compiled (the .mo files are committed, so
     serving needs no gettext), leaving the apps' own catalogs to their owners."""
     root = Path(settings.BASE_DIR)
@@ -84,4 +91,5 @@ if __name__ == "__main__":
 
     os.environ.setdefault("DJANGO_SETTINGS_MODULE", "robotide.settings")
     django.setup()
-    update_root_catalogs()
+    for each in translated_locales():
+        update_root_catalogs(each)

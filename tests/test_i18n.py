@@ -19,7 +19,7 @@ from tests.conftest import in_ci
 pytestmark = pytest.mark.django_db
 
 ROOT = Path(settings.BASE_DIR)
-LOCALE = "pt_BR"
+LOCALES = catalogs.translated_locales()  # every language offered but English: pt_BR
 
 
 def need_gettext():
@@ -45,21 +45,26 @@ def entries(catalog) -> dict:
     return {(e.msgctxt, e.msgid): e.msgstr_plural or e.msgstr for e in catalog if not e.obsolete}
 
 
-def test_every_catalog_is_complete_for_pt_br(tmp_path):
+def test_pt_br_is_offered():
+    assert "pt_BR" in LOCALES
+
+
+@pytest.mark.parametrize("locale", LOCALES)
+def test_every_catalog_is_complete(tmp_path, locale):
     """makemessages over a copy of the tree: every string of the templates, the Python code and
     the scripts is in a catalog, translated, and none is fuzzy (a guess msgmerge made)."""
     need_gettext()
     tree = copy_of_the_tree(tmp_path / "tree")
-    catalogs.make_messages(tree, LOCALE)
+    catalogs.make_messages(tree, locale)
 
     folders = catalogs.locale_dirs(tree)
     assert tree / "locale" in folders
     problems = []
     for folder in folders:
-        django_po = folder / LOCALE / "LC_MESSAGES" / "django.po"
+        django_po = folder / locale / "LC_MESSAGES" / "django.po"
         if not django_po.exists():
             problems.append(f"{django_po.relative_to(tree)}: missing")
-        for po_path in sorted((folder / LOCALE / "LC_MESSAGES").glob("*.po")):
+        for po_path in sorted((folder / locale / "LC_MESSAGES").glob("*.po")):
             po = polib.pofile(str(po_path))
             name = po_path.relative_to(tree)
             problems += [f"{name}: untranslated {e.msgid!r}" for e in po.untranslated_entries()]
@@ -67,10 +72,11 @@ def test_every_catalog_is_complete_for_pt_br(tmp_path):
     assert not problems, "\n".join(problems)
 
 
-def test_the_committed_mo_files_are_their_po_compiled(tmp_path):
+@pytest.mark.parametrize("locale", LOCALES)
+def test_the_committed_mo_files_are_their_po_compiled(tmp_path, locale):
     """Serving reads the .mo files (make run needs no gettext): each says what its .po says."""
     need_gettext()
-    pos = [p for d in catalogs.locale_dirs(ROOT) for p in d.glob(f"{LOCALE}/LC_MESSAGES/*.po")]
+    pos = [p for d in catalogs.locale_dirs(ROOT) for p in d.glob(f"{locale}/LC_MESSAGES/*.po")]
     assert pos
     for po_path in pos:
         mo_path = po_path.with_suffix(".mo")

@@ -2,7 +2,9 @@ from datetime import timedelta
 
 import nh3
 from django import template
+from django.utils.formats import get_format
 from django.utils.safestring import mark_safe
+from django.utils.translation import gettext as _
 
 register = template.Library()
 
@@ -14,7 +16,7 @@ def duration(value: timedelta | None) -> str:
         return "—"
     seconds = value.total_seconds()
     if seconds < 60:
-        return f"{seconds:.1f} s"
+        return _decimal(f"{seconds:.1f}") + " s"
     minutes, secs = divmod(int(seconds), 60)
     if minutes < 60:
         return f"{minutes} min {secs:02d} s"
@@ -26,12 +28,18 @@ def duration(value: timedelta | None) -> str:
 def reading(value) -> str:
     """A sensor reading or shown value, numbers rounded for reading."""
     if isinstance(value, bool):
-        return "yes" if value else "no"
+        return _("yes") if value else _("no")
     if isinstance(value, float):
-        return f"{value:.3f}".rstrip("0").rstrip(".") if abs(value) < 1e6 else f"{value:.3g}"
+        text = f"{value:.3f}".rstrip("0").rstrip(".") if abs(value) < 1e6 else f"{value:.3g}"
+        return _decimal(text)
     if value is None:
         return "—"
     return str(value)
+
+
+def _decimal(text: str) -> str:
+    """A number written by Python, with the language's decimal mark (1,5 in pt-BR)."""
+    return text.replace(".", get_format("DECIMAL_SEPARATOR"))
 
 
 @register.filter
