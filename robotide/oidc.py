@@ -244,7 +244,10 @@ class ProviderBackend(ModelBackend):
         return user
 
     def _update(self, user, claims: dict, config: dict) -> None:
-        for field in ("first_name", "last_name", "email"):
+        fields = ["first_name", "last_name", "email"]
+        if claims.get("email_verified") is False:
+            fields.remove("email")  # unverified: mail must not go out as from this address
+        for field in fields:
             value = claims.get(config["claims"][field])
             if isinstance(value, str):
                 setattr(user, field, value[: user._meta.get_field(field).max_length])

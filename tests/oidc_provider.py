@@ -44,7 +44,12 @@ ACCOUNTS = {
     },
     "sia": {
         "password": "sia-pass-1",
-        "claims": {"preferred_username": "sia", "email": "sia@uni.test", "roles": ["staff"]},
+        "claims": {
+            "preferred_username": "sia",
+            "email": "someone-else@uni.test",
+            "email_verified": False,
+            "roles": ["staff"],
+        },
     },
     "dora": {
         "password": "dora-pass-1",
