@@ -4,7 +4,9 @@ beside local accounts and the directory.
 Configured by ROBOTIDE_OIDC_* (robotide.settings.oidc_settings). Authlib is the client: it
 reads the provider's discovery document on the first sign-in (a provider that is down neither
 stops the start nor stays cached: the next sign-in asks again), sends PKCE (S256), and checks
-the state, then the ID token's signature, issuer, audience and nonce.
+the state, then the ID token's signature, issuer, audience and nonce. (mozilla-django-oidc, the
+other choice, takes each endpoint as a setting of its own rather than the discovery document,
+and finds accounts by e-mail unless told otherwise.)
 
 An identity is the provider's (issuer, sub), kept in ProviderAccount: never a user name or an
 e-mail, so a provider's user can never take over a local account. The account made on first
