@@ -404,7 +404,7 @@ if REDIS_URL:
     }
 # -- end of Web security --------------------------------------------------------------------------
 
-LANGUAGE_CODE = "en-us"
+LANGUAGE_CODE = "en"
 TIME_ZONE = os.environ.get("TIME_ZONE", "UTC")
 # Pages speak the browser's language (Accept-Language), or the one chosen in the menu, which a
 # signed-in user keeps (robotide.language). A language here needs a complete catalog in locale/.

@@ -122,6 +122,22 @@ def test_the_pages_speak_portuguese(page, appliance, screenshot):
     )  # fmt: skip
 
 
+def test_blocks_speak_portuguese(page, appliance, screenshot):
+    """Our blocks and categories from the JavaScript catalog, Blockly's own from its pt-br.js."""
+    program = appliance.create_program("Blocos", "", language="blocks")
+    page.goto(f"/programs/{program['id']}/")
+    toolbox = page.locator(".blocklyToolbox, .blocklyToolboxDiv").first
+    expect(toolbox).to_contain_text("Robô")
+    expect(toolbox).to_contain_text("Lógica")
+    expect(toolbox).to_contain_text("Laços")
+    assert page.evaluate("Blockly.Msg.CONTROLS_IF_MSG_IF") == "se"
+    assert page.evaluate("Blockly.Blocks.robot_stop.init && true")
+    shows(
+        page, "blocks", ["O Python que ele executa", "Copiar como programa Python"],
+        [*MENU_ENGLISH, "The Python it runs", "Logic", "Loops"], screenshot,
+    )  # fmt: skip
+
+
 def test_the_switcher_by_keyboard_and_the_choice_kept(page, new_page, screenshot):
     """The menu's switcher works from the keyboard, and the account keeps the choice: a new
     browser asking for pt-BR gets English after signing in."""
