@@ -233,7 +233,7 @@ def test_the_workbench_template_lines_attach_it_and_follow_the_language(bench):
     page.keyboard.press("Control+Space")
     expect(page.locator(".CodeMirror-hints li").first).to_contain_text("bot.stop()")
     page.keyboard.press("Escape")
-    page.select_option("select[name=language]", "perl")
+    page.select_option("#editor-form select[name=language]", "perl")
     help_for(page, "perl")
     set_editor_text(page, "use Robot;\nmy $bot = Robot->new;\n")
     type_at_end(page, "$bot->st")
