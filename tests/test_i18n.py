@@ -185,3 +185,27 @@ def test_a_websocket_speaks_its_browsers_language():
     assert language_from_headers({"accept-language": "de-DE"}) == "en"
     cookie = {"cookie": "csrftoken=x; django_language=pt-br", "accept-language": "en"}
     assert language_from_headers(cookie) == "pt-br"
+
+
+@pytest.mark.django_db(transaction=True)
+async def test_a_websockets_fragments_are_in_its_users_language():
+    """Live fragments (run states, sensors) render in the connection's task: the account's
+    language there too, else the browser's."""
+    from asgiref.sync import sync_to_async
+    from django.contrib.auth.models import AnonymousUser
+    from django.utils import translation
+
+    from robotide.language import WebsocketLanguage
+
+    seen = []
+
+    async def consumer(scope, receive, send):
+        seen.append(translation.get_language())
+
+    app = WebsocketLanguage(consumer)
+    portuguese = [(b"accept-language", b"pt-BR,pt;q=0.9")]
+    await app({"type": "websocket", "headers": portuguese, "user": AnonymousUser()}, None, None)
+    bia = await sync_to_async(User.objects.create_user)("bia", password="pw-bia-123")
+    await sync_to_async(LanguagePreference.objects.create)(user=bia, language="en")
+    await app({"type": "websocket", "headers": portuguese, "user": bia}, None, None)
+    assert seen == ["pt-br", "en"]
