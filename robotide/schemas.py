@@ -1,5 +1,6 @@
 """What every request body of the API has in common."""
 
+from django.utils.translation import gettext as _
 from ninja import Schema
 from ninja.schema import DjangoGetter
 from pydantic import model_validator
@@ -14,5 +15,5 @@ class Body(Schema):
     def an_object(cls, data):
         given = data._obj if isinstance(data, DjangoGetter) else data  # ninja wraps what it reads
         if not isinstance(given, dict):
-            raise ValueError("the body must be a JSON object")
+            raise ValueError(_("the body must be a JSON object"))
         return data
