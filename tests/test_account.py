@@ -31,6 +31,17 @@ def test_the_header_links_to_the_account_page(client, alice):
     assert 'href="/accounts/password/"' in page  # the password change stays at hand
 
 
+def test_an_institution_account_is_not_offered_a_password_it_does_not_have(client):
+    # Directory and OpenID Connect accounts have no usable password here.
+    user = User.objects.create_user("dana")
+    user.set_unusable_password()
+    user.save()
+    client.force_login(user)
+    page = client.get("/accounts/").content.decode()
+    assert 'href="/accounts/password/"' not in page
+    assert "its password is changed there" in page
+
+
 def test_a_token_is_shown_once_and_works(client, alice):
     created = client.post("/accounts/", {"name": "laptop"}, follow=True)
     token = ApiToken.objects.get(user=alice)
