@@ -21,6 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from django.test import Client
+from django.urls import reverse
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -908,6 +910,7 @@ PAGE = """<!doctype html>
 <script src="{static}/vendor/blockly/blockly_compressed.js"></script>
 <script src="{static}/vendor/blockly/blocks_compressed.js"></script>
 <script src="{static}/vendor/blockly/msg/en.js"></script>
+<script src="catalog.js"></script>
 <script src="{static}/robotide/blocks.js"></script>
 </head><body style="margin: 0">
 <div id="blocks" style="height: 560px; width: 960px"></div>
@@ -923,6 +926,8 @@ def test_blocks_js_mounts_a_workspace_in_chromium(tmp_path):
 
     page_file = tmp_path / "blocks.html"
     page_file.write_text(PAGE.format(static=STATIC.as_uri()))
+    # The scripts' gettext, as the pages load it before them (the JavaScript catalog).
+    (tmp_path / "catalog.js").write_bytes(Client().get(reverse("javascript-catalog")).content)
     square = (EXAMPLES / "square.json").read_text()
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=chromium, headless=True, args=["--no-sandbox"])
