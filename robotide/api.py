@@ -8,7 +8,7 @@ from django.http import Http404, JsonResponse
 from django.utils.translation import gettext as _
 from django.views import defaults
 from ninja import NinjaAPI
-from ninja.errors import AuthenticationError, HttpError
+from ninja.errors import AuthenticationError, HttpError, ValidationError
 from ninja.security import HttpBearer, django_auth
 
 from programs.api import programs_router, runs_router
@@ -116,6 +116,19 @@ def forbidden(request, exc):
 def unauthorized(request, exc):
     detail = _("Authentication required: sign in or send Authorization: Bearer <token>.")
     return api.create_response(request, {"detail": detail}, status=401)
+
+
+@api.exception_handler(ValidationError)
+def invalid(request, exc):
+    """Pydantic's list of errors, each message as our validators wrote it: in the reader's
+    language, without pydantic's English "Value error, " before it."""
+    errors = [
+        {**error, "msg": error["msg"].removeprefix("Value error, ")}
+        if error.get("type") == "value_error" and isinstance(error.get("msg"), str)
+        else error
+        for error in exc.errors
+    ]
+    return api.create_response(request, {"detail": errors}, status=422)
 
 
 @api.exception_handler(AgentUnavailable)
