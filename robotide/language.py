@@ -1,11 +1,16 @@
 """The pages' language: a signed-in user's stored choice, else Django's LocaleMiddleware's
-(the language cookie the menu's switcher sets, then the browser's Accept-Language)."""
+(the language cookie the menu's switcher sets, then the browser's Accept-Language).
+
+The stored choice is read once per session, at sign-in, and kept in the session: a page or a
+websocket then needs no database trip for it (a run's first line waits for its websocket)."""
 
 from django.conf import settings
 from django.utils import translation
 from django.views.i18n import set_language as django_set_language
 
 from robotide.models import LanguagePreference
+
+SESSION_KEY = "robotide_language"  # the account's language, "" for none
 
 
 def supported(code: str | None) -> bool:
@@ -19,7 +24,15 @@ def set_language(request):
     code = request.POST.get("language")
     if request.method == "POST" and request.user.is_authenticated and supported(code):
         LanguagePreference.objects.update_or_create(user=request.user, defaults={"language": code})
+        request.session[SESSION_KEY] = code
     return response
+
+
+def remember_on_sign_in(sender, request, user, **kwargs):
+    """user_logged_in: the account's language into its new session (any sign-in: password,
+    directory, OpenID Connect)."""
+    if request is not None and hasattr(request, "session"):
+        request.session[SESSION_KEY] = stored_language(user) or ""
 
 
 class UserLanguageMiddleware:
@@ -29,11 +42,20 @@ class UserLanguageMiddleware:
         self.get_response = get_response
 
     def __call__(self, request):
-        code = stored_language(request.user)
+        code = session_language(request)
         if code:
             translation.activate(code)
             request.LANGUAGE_CODE = code
         return self.get_response(request)
+
+
+def session_language(request) -> str | None:
+    if not request.user.is_authenticated:
+        return None
+    if SESSION_KEY not in request.session:  # a session from before sign-ins kept it
+        request.session[SESSION_KEY] = stored_language(request.user) or ""
+    code = request.session[SESSION_KEY]
+    return code if supported(code) else None
 
 
 def stored_language(user) -> str | None:
@@ -70,10 +92,22 @@ class WebsocketLanguage:
         self.inner = inner
 
     async def __call__(self, scope, receive, send):
-        from channels.db import database_sync_to_async
-
         headers = {k.decode("latin-1"): v.decode("latin-1") for k, v in scope.get("headers", [])}
-        user = scope.get("user")
-        stored = await database_sync_to_async(stored_language)(user) if user else None
+        stored = await self.account_language(scope)
         translation.activate(stored or language_from_headers(headers))
         return await self.inner(scope, receive, send)
+
+    @staticmethod
+    async def account_language(scope) -> str | None:
+        from channels.db import database_sync_to_async
+
+        user = scope.get("user")
+        if user is None or not user.is_authenticated:
+            return None
+        # AuthMiddlewareStack has loaded the session to find the user: read it as loaded,
+        # with no trip to a worker thread.
+        loaded = getattr(scope.get("session"), "_session_cache", None)
+        if loaded is not None and SESSION_KEY in loaded:
+            code = loaded[SESSION_KEY]
+            return code if supported(code) else None
+        return await database_sync_to_async(stored_language)(user)

@@ -209,3 +209,41 @@ async def test_a_websockets_fragments_are_in_its_users_language():
     await sync_to_async(LanguagePreference.objects.create)(user=bia, language="en")
     await app({"type": "websocket", "headers": portuguese, "user": bia}, None, None)
     assert seen == ["pt-br", "en"]
+
+
+def test_a_signed_in_page_asks_the_database_nothing_more_for_the_language(alice):
+    from django.db import connection
+    from django.test.utils import CaptureQueriesContext
+
+    # The account's language is read at sign-in and kept in the session (a run's first line
+    # waits for its websocket, which would otherwise take a database trip for it).
+    LanguagePreference.objects.create(user=alice, language="pt-br")
+    client = Client(HTTP_ACCEPT_LANGUAGE="en")
+    sign_in(client)
+    client.get("/programs/")
+    with CaptureQueriesContext(connection) as counted:
+        assert "Sair" in client.get("/programs/").content.decode()
+    asked = " ".join(query["sql"] for query in counted.captured_queries)
+    assert "languagepreference" not in asked
+
+
+async def test_a_websocket_reads_the_language_from_the_loaded_session():
+    """No database here (no django_db mark): the session AuthMiddlewareStack loaded says it."""
+    from django.utils import translation
+
+    from robotide.language import SESSION_KEY, WebsocketLanguage
+
+    class Session:
+        _session_cache = {SESSION_KEY: "pt-br"}
+
+    seen = []
+
+    async def consumer(scope, receive, send):
+        seen.append(translation.get_language())
+
+    english = [(b"accept-language", b"en")]
+    user = User(username="carla", pk=7)
+    await WebsocketLanguage(consumer)(
+        {"type": "websocket", "headers": english, "user": user, "session": Session()}, None, None
+    )
+    assert seen == ["pt-br"]
