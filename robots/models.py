@@ -7,6 +7,8 @@ from django.utils import timezone
 from django.utils.translation import gettext, gettext_noop
 from django.utils.translation import gettext_lazy as _
 
+from robots.isolation_words import isolation_shown
+
 # Settings for the runs on a robot; anything else in its `settings` goes to its driver.
 RUN_SETTINGS = (
     "limits", "isolation", "network", "tmp_mb", "loopback_ports", "allow_networks", "camera",
@@ -94,6 +96,11 @@ class Robot(models.Model):
 
     def __str__(self) -> str:
         return self.name
+
+    @property
+    def isolation_shown(self) -> str:
+        """How its programs are boxed, in the reader's language (stored as runbox says it)."""
+        return isolation_shown(self.isolation)
 
     @property
     def online(self) -> bool:

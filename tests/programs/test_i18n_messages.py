@@ -188,3 +188,26 @@ def _entry(block: str) -> tuple:
     if "msgid_plural" in fields:
         return (msgid, 1), fields["msgstr[1]"]
     return msgid, fields["msgstr"]
+
+
+def test_how_programs_are_boxed_in_the_readers_language():
+    from robots.isolation_words import isolation_shown
+
+    stored = "sandbox (bubblewrap), own OS account, seccomp, network loopback; cgroup v1 (memory+swap, pids, cpu)"  # noqa: E501
+    with translation.override("en"):
+        assert isolation_shown(stored) == stored  # as runbox says it
+    with translation.override("pt-br"):
+        shown = isolation_shown(stored)
+    assert shown == (
+        "sandbox (bubblewrap), conta do sistema própria, seccomp, rede loopback;"
+        " cgroup v1 (memória+swap, processos, cpu)"
+    )
+
+
+def test_the_admin_names_its_sections_in_portuguese(alice):
+    alice.is_staff = alice.is_superuser = True
+    alice.save()
+    client = Client(**PT)
+    client.force_login(alice)
+    page = client.get("/admin/").content.decode()
+    assert "Programas" in page and "Robôs" in page
