@@ -139,7 +139,7 @@ def take_away_access(robot, users) -> str:
                 len(users),
             ) % {"count": len(users), "robot": robot.name, "names": names}
         else:
-            group, _ = Group.objects.get_or_create(name=f"{robot.name}-users"[:150])
+            group, _created = Group.objects.get_or_create(name=f"{robot.name}-users"[:150])
             group.user_set.add(*User.objects.exclude(pk__in=ids))
             group.user_set.remove(*users)
             robot.groups.set([group])

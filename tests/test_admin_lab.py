@@ -233,3 +233,15 @@ def test_the_robot_admin_adds_gateway_endpoints_checked_as_the_api_checks_them(c
     ]
     row = robot.endpoints.get()
     assert (row.address, row.allow, row.read_only) == ("127.0.0.1:14560", [0, 76], True)
+
+
+@pytest.mark.parametrize("of_a_class", [True, False])
+def test_taking_a_robot_from_a_superuser_says_they_keep_every_robot(
+    client, lab, admin_user, of_a_class
+):
+    robot = lab["robot"]
+    if of_a_class:
+        robot.groups.set([lab["klass"]])
+    response = _take(client, [lab["bob"], admin_user], robot)
+    assert response.status_code == 200
+    assert b"Superusers among them still use every robot." in response.content
