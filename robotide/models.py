@@ -103,6 +103,13 @@ class DirectoryAccount(models.Model):
         sight. Only what the directory gave before is taken away."""
         from django.contrib.auth.models import Group
 
+        # A group that grants permissions is an admin role made here, never a class.
+        roles = set(
+            Group.objects.filter(name__in=classes, permissions__isnull=False).values_list(
+                "name", flat=True
+            )
+        )
+        classes = set(classes) - roles
         member_of = set() if teaches else classes
         taught = classes if teaches else set()
         groups = {name: Group.objects.get_or_create(name=name)[0] for name in classes}

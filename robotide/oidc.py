@@ -38,6 +38,7 @@ from joserfc.errors import JoseError
 
 log = logging.getLogger(__name__)
 NEXT_KEY, ID_TOKEN_KEY = "oidc_next", "oidc_id_token"
+CLASS_NAME_MAX = 150  # a class is a Group: longer names from a claim are not classes
 BACKEND = "robotide.oidc.ProviderBackend"
 _clients: dict[str, object] = {}  # one per configuration: each keeps its discovery document
 
@@ -103,9 +104,10 @@ def callback(request):
         return _login_page(request, str(exc), status=403)
     except (requests.RequestException, ValueError) as exc:
         return _unreachable(request, exc)
+    next_url = request.session.pop(NEXT_KEY, "")  # before login(), which may flush the session
     login(request, user, backend=BACKEND)
     request.session[ID_TOKEN_KEY] = token["id_token"]  # the hint that signs out at the provider
-    return redirect(request.session.pop(NEXT_KEY, "") or settings.LOGIN_REDIRECT_URL)
+    return redirect(next_url or settings.LOGIN_REDIRECT_URL)
 
 
 class SignOutView(LogoutView):
@@ -149,6 +151,17 @@ def _is_safe(request, url: str) -> bool:
     )
 
 
+# OAuth 2.0's and OpenID Connect's error codes, and authlib's own: a code outside these is not
+# shown (the callback's query is the attacker's to write, and so is its error_description).
+KNOWN_ERRORS = {
+    "invalid_request", "unauthorized_client", "unsupported_response_type", "invalid_scope",
+    "server_error", "temporarily_unavailable", "interaction_required", "login_required",
+    "account_selection_required", "consent_required", "invalid_grant", "invalid_client",
+    "no_id_token", "sub_mismatch", "missing_claim", "invalid_claim", "bad_signature",
+    "expired_token", "invalid_token",
+}  # fmt: skip
+
+
 def _refusal(exc: AuthlibBaseError | JoseError) -> str:
     name = settings.OIDC["name"]
     if exc.error == "mismatching_state":
@@ -158,6 +171,13 @@ def _refusal(exc: AuthlibBaseError | JoseError) -> str:
         ) % {"name": name}
     if exc.error == "access_denied":
         return _("%(name)s did not sign you in.") % {"name": name}
+    if isinstance(exc, OAuthError):  # its words may be the callback's query: only the code
+        code = exc.error if exc.error in KNOWN_ERRORS else "error"
+        return _("Sign-in with %(name)s refused (%(code)s); the server's log says more.") % {
+            "name": name,
+            "code": code,
+        }
+    # The ID token's checks (signature, issuer, audience, nonce): the library's own words.
     return _("Sign-in with %(name)s refused: %(why)s") % {
         "name": name,
         "why": exc.description or exc.error,
@@ -175,6 +195,7 @@ def _unreachable(request, exc):
 def _login_page(request, message: str, status: int):
     """The sign-in page, saying what went wrong (the login view, whatever urls.py makes it)."""
     messages.error(request, message)
+    request.switcher_next = reverse("login")  # not this callback's URL, with its query
     response = resolve(reverse("login")).func(request)
     response.status_code = status
     return response
@@ -196,7 +217,10 @@ def _values(claims: dict, name: str) -> set[str]:
 def _classes(claims: dict, config: dict) -> tuple[set[str], bool]:
     """The classes the claims name, and whether their teacher (or else a member)."""
     named = _values(claims, config["classes_claim"])
-    classes = {c for c in named if fnmatch.fnmatchcase(c, config["class_pattern"])}
+    classes = {
+        c for c in named
+        if len(c) <= CLASS_NAME_MAX and fnmatch.fnmatchcase(c, config["class_pattern"])
+    }  # fmt: skip
     teacher_claim, teacher_value = config["teacher"]
     return classes, teacher_value in _values(claims, teacher_claim)
 
@@ -207,6 +231,22 @@ class ProviderBackend(ModelBackend):
     def authenticate(self, request, claims=None, issuer=None, **kwargs):
         if claims is None or issuer is None:
             return None  # a password sign-in: not ours
+        try:
+            return self._sign_in(claims, issuer)
+        except (Refused, IntegrityError):
+            # A first sign-in of the same identity in another tab at the same moment made the
+            # account (its row did not exist to be locked): sign in to that one.
+            if not self._known(claims, issuer):
+                raise
+            return self._sign_in(claims, issuer)
+
+    @staticmethod
+    def _known(claims: dict, issuer: str) -> bool:
+        from robotide.models import ProviderAccount
+
+        return ProviderAccount.objects.filter(issuer=issuer, subject=claims["sub"]).exists()
+
+    def _sign_in(self, claims: dict, issuer: str):
         from robotide.models import ProviderAccount
 
         config = settings.OIDC

@@ -13,6 +13,7 @@ from urllib.parse import urlsplit
 
 import dj_database_url
 from django.core.exceptions import ImproperlyConfigured
+from django.utils.translation import gettext_lazy
 
 BASE_DIR = Path(__file__).resolve().parent.parent
 
@@ -356,6 +357,19 @@ def oidc_settings() -> dict:
                 "email=<claim>"
             )
         claims[field] = claim
+    scopes = os.environ.get("ROBOTIDE_OIDC_SCOPES") or "openid email profile"
+    if "openid" not in scopes.split():
+        raise ImproperlyConfigured(
+            f"ROBOTIDE_OIDC_SCOPES must include openid (no ID token without it): {scopes!r}"
+        )
+    if os.environ.get("ROBOTIDE_OIDC_CLASSES_CLAIM") and not os.environ.get(
+        "ROBOTIDE_OIDC_CLASS_PATTERN"
+    ):
+        # Users may name their own groups at many providers: which are classes is said here.
+        raise ImproperlyConfigured(
+            "ROBOTIDE_OIDC_CLASS_PATTERN must be set when ROBOTIDE_OIDC_CLASSES_CLAIM is: which "
+            "of the claim's groups are classes (a shell pattern, e.g. robotics-*)"
+        )
     for role in ("TEACHER", "STAFF"):
         claim = os.environ.get(f"ROBOTIDE_OIDC_{role}_CLAIM", "")
         if claim and not os.environ.get(f"ROBOTIDE_OIDC_{role}_VALUE"):
@@ -366,11 +380,11 @@ def oidc_settings() -> dict:
         "discovery_url": discovery,
         "client_id": os.environ["ROBOTIDE_OIDC_CLIENT_ID"],
         "client_secret": os.environ.get("ROBOTIDE_OIDC_CLIENT_SECRET", ""),  # none: PKCE alone
-        "name": os.environ.get("ROBOTIDE_OIDC_NAME") or "single sign-on",
-        "scopes": os.environ.get("ROBOTIDE_OIDC_SCOPES") or "openid email profile",
+        "name": os.environ.get("ROBOTIDE_OIDC_NAME") or gettext_lazy("single sign-on"),
+        "scopes": scopes,
         "claims": claims,
         "classes_claim": os.environ.get("ROBOTIDE_OIDC_CLASSES_CLAIM", ""),
-        "class_pattern": os.environ.get("ROBOTIDE_OIDC_CLASS_PATTERN") or "*",
+        "class_pattern": os.environ.get("ROBOTIDE_OIDC_CLASS_PATTERN", ""),
         "teacher": (
             os.environ.get("ROBOTIDE_OIDC_TEACHER_CLAIM", ""),
             os.environ.get("ROBOTIDE_OIDC_TEACHER_VALUE", ""),

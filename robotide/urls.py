@@ -1,6 +1,8 @@
 from django.contrib import admin
 from django.contrib.auth import views as auth_views
 from django.urls import include, path
+from django.utils import timezone
+from django.views.decorators.http import last_modified
 from django.views.generic import RedirectView
 from django.views.i18n import JavaScriptCatalog
 
@@ -12,6 +14,8 @@ from robotide.api import api
 from robotide.security import LoginForm
 from robots import gateway_views
 from robots import views as robots
+
+STARTED = timezone.now().replace(microsecond=0)  # the script catalog is as old as the process
 
 urlpatterns = [
     path("", RedirectView.as_view(pattern_name="program-list"), name="home"),
@@ -119,7 +123,12 @@ urlpatterns = [
     ),
     # The menu's language switcher, and the strings the scripts show (djangojs catalog).
     path("i18n/setlang/", language.set_language, name="set_language"),
-    path("i18n/js/", JavaScriptCatalog.as_view(), name="javascript-catalog"),
+    # Built from the catalogs once per process start; browsers revalidate it (304) per page.
+    path(
+        "i18n/js/",
+        last_modified(lambda request, **kwargs: STARTED)(JavaScriptCatalog.as_view()),
+        name="javascript-catalog",
+    ),
     path("api/", api.urls),
     path("admin/", admin.site.urls),
 ]

@@ -68,7 +68,7 @@ def request_stop(run: Run) -> None:
             raise AgentUnreachable(
                 _(
                     "the agent of robot %(robot)s cannot be reached to stop it (%(why)s); the"
-                    " emergency stop or its agent's restart will"
+                    " emergency stop or its agent's restart will stop it"
                 )
                 % {"robot": repr(run.robot.name), "why": type(exc).__name__}
             ) from exc

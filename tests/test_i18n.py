@@ -247,3 +247,12 @@ async def test_a_websocket_reads_the_language_from_the_loaded_session():
         {"type": "websocket", "headers": english, "user": user, "session": Session()}, None, None
     )
     assert seen == ["pt-br"]
+
+
+def test_the_scripts_catalog_is_not_rebuilt_for_every_page():
+    first = Client(HTTP_ACCEPT_LANGUAGE="pt-BR").get("/i18n/js/?l=pt-br")
+    assert first.status_code == 200 and first["Last-Modified"]
+    again = Client(HTTP_ACCEPT_LANGUAGE="pt-BR").get(
+        "/i18n/js/?l=pt-br", HTTP_IF_MODIFIED_SINCE=first["Last-Modified"]
+    )
+    assert again.status_code == 304

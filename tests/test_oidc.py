@@ -86,8 +86,25 @@ def test_a_student_signs_in_with_their_class_and_the_examples(oidc):
     assert names == set(EXAMPLES.values())
 
 
+def test_a_group_that_grants_permissions_here_is_never_joined_as_a_class(oidc):
+    # A provider where users name their own groups: one named like the lab's admin role.
+    from django.contrib.auth.models import Group, Permission
+
+    admins = Group.objects.create(name="class-admins")
+    admins.permissions.add(Permission.objects.get(codename="change_user"))
+    oidc.accounts["ana"]["claims"]["groups"] = ["class-robotics1", "class-admins"]
+    oidc.save_accounts()
+    sign_in(oidc, "ana")
+    ana = User.objects.get(username="ana")
+    assert [g.name for g in ana.groups.all()] == ["class-robotics1"]
+    assert not ana.has_perm("auth.change_user")
+
+
 def test_the_page_asked_for_comes_next_if_it_is_here(oidc):
-    for asked, comes in [("/runs/", "/runs/"), ("https://evil.test/", "/programs/")]:
+    for asked, comes in [
+        ("/runs/", "/runs/"), ("https://evil.test/", "/programs/"),
+        ("//evil.test/", "/programs/"), ("/\\evil.test/", "/programs/"),
+    ]:  # fmt: skip
         client = Client()
         start = to_provider(client, "?" + urlencode({"next": asked}))
         response = callback(client, oidc.sign_in_elsewhere(start, "ana", "ana-pass-1"))
@@ -211,7 +228,7 @@ def test_a_code_without_its_pkce_verifier_is_refused(oidc):
     session.save()
     response = callback(client, back)
     assert response.status_code == 400 and signed_in_as(client) is None
-    assert "refused: grant request is invalid" in response.content.decode()
+    assert "refused (invalid_grant)" in response.content.decode()
 
 
 def test_a_refusal_at_the_provider_says_so(oidc):
@@ -224,6 +241,19 @@ def test_a_refusal_at_the_provider_says_so(oidc):
     assert (
         response.status_code == 400 and "Uni Login did not sign you in" in response.content.decode()
     )
+
+
+def test_a_callback_cannot_put_its_own_words_on_the_sign_in_page(oidc):
+    client = Client()
+    to_provider(client)
+    key, _ = _stored_state(client)
+    state = key.rsplit("_", 1)[1]
+    said = "Your account is locked: call 555-0100 and give your password"
+    for error in ("server_error", "call_555-0100"):
+        query = urlencode({"error": error, "error_description": said, "state": state})
+        page = client.get(f"/accounts/oidc/callback/?{query}").content.decode()
+        assert "555-0100" not in page and "give your password" not in page
+        assert "Sign-in with Uni Login refused" in page
 
 
 # -- sign-out, the sign-in page, an unreachable provider ----------------------------------------
@@ -303,6 +333,15 @@ def test_a_half_configured_provider_fails_loudly(monkeypatch):
     with pytest.raises(ImproperlyConfigured, match="ROBOTIDE_OIDC_ATTRS"):
         oidc_settings()
     monkeypatch.delenv("ROBOTIDE_OIDC_ATTRS")
+    monkeypatch.setenv("ROBOTIDE_OIDC_SCOPES", "email profile")
+    with pytest.raises(ImproperlyConfigured, match="openid"):
+        oidc_settings()
+    monkeypatch.delenv("ROBOTIDE_OIDC_SCOPES")
+    monkeypatch.setenv("ROBOTIDE_OIDC_CLASSES_CLAIM", "groups")
+    monkeypatch.delenv("ROBOTIDE_OIDC_CLASS_PATTERN", raising=False)
+    with pytest.raises(ImproperlyConfigured, match="ROBOTIDE_OIDC_CLASS_PATTERN"):
+        oidc_settings()
+    monkeypatch.delenv("ROBOTIDE_OIDC_CLASSES_CLAIM")
     config = oidc_settings()
     assert config["discovery_url"] == "https://id.uni.test/.well-known/openid-configuration"
 
