@@ -82,8 +82,12 @@ def update_root_catalogs(locale: str) -> None:
     # would skip templates/programs/ too, as a pattern without "/" matches a name anywhere.
     apps = [f"{d.parent.relative_to(root)}/?*" for d in locale_dirs(root) if d.parent != root]
     make_messages(root, locale, skip=apps)
+    cwd = os.getcwd()
     os.chdir(root)
-    call_command("compilemessages", locale=[locale], ignore_patterns=[*IGNORE, *apps])
+    try:
+        call_command("compilemessages", locale=[locale], ignore_patterns=[*IGNORE, *apps])
+    finally:
+        os.chdir(cwd)
 
 
 if __name__ == "__main__":
