@@ -130,6 +130,7 @@ class RobotAgent:
         self.handlers.update(self.bridges.handlers)
         self.queue = RunQueue(self)  # runs waiting their turn while the robot is busy
         self.boxes = Ahead(self._make_box, self.cgroup_prefix)  # one made ahead of its run
+        self._shutting_down = False
         self.handlers.update(self.queue.handlers)
         self.lent_to: str | None = None  # a serial bridge client has the robot's device
         self._driver_back = asyncio.Event()  # set while the driver has its device
@@ -277,6 +278,7 @@ class RobotAgent:
                 delay = min(delay * 2, LINK_RETRY_MAX)
 
     async def shutdown(self) -> None:
+        self._shutting_down = True  # runs ending now make no box ahead: nobody would close it
         await self.queue.close()  # nothing more starts from the queue
         await self.boxes.close()
         if self._starting:  # let starts under way finish, so their programs are stopped too
@@ -486,7 +488,7 @@ class RobotAgent:
         return active
 
     def _box_ahead(self, now: bool = False) -> None:
-        if self.isolation is not None:
+        if self.isolation is not None and not self._shutting_down:
             self.boxes.soon(self._box_kind(self.gateway.program_env()), now)
 
     def _box_kind(self, program_env: dict) -> "BoxKind":
