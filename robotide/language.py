@@ -66,22 +66,15 @@ def stored_language(user) -> str | None:
 
 
 def language_from_headers(headers: dict[str, str]) -> str:
-    """The switcher's cookie, else the best of Accept-Language, else the default: as
-    LocaleMiddleware chooses for a page, for a websocket that has no HttpRequest."""
-    from http.cookies import SimpleCookie
+    """The language LocaleMiddleware would choose for a page (the switcher's cookie, then
+    Accept-Language, then the default), for a websocket, which has no HttpRequest."""
+    from django.http import HttpRequest
+    from django.http.cookie import parse_cookie
 
-    cookie = SimpleCookie()
-    cookie.load(headers.get("cookie", ""))
-    morsel = cookie.get(settings.LANGUAGE_COOKIE_NAME)
-    candidates = [morsel.value] if morsel else []
-    accept = headers.get("accept-language", "")
-    candidates += [lang for lang, _q in translation.trans_real.parse_accept_lang_header(accept)]
-    for code in candidates:
-        try:
-            return translation.get_supported_language_variant(code)
-        except LookupError:
-            continue
-    return translation.get_supported_language_variant(settings.LANGUAGE_CODE)
+    request = HttpRequest()
+    request.COOKIES = parse_cookie(headers.get("cookie", ""))
+    request.META["HTTP_ACCEPT_LANGUAGE"] = headers.get("accept-language", "")
+    return translation.get_language_from_request(request)
 
 
 class WebsocketLanguage:
