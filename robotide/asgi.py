@@ -4,16 +4,18 @@ The live camera (``/robots/<name>/camera.mjpg``) is an endless response: it is a
 event loop by a Channels consumer, so a viewer never holds one of the WSGI worker threads.
 
 Django's ASGI handler hops between the event loop and a thread for each of its (sync)
-middlewares, about 4 ms per request here; under WSGI a request is one hop to a worker thread.
+middlewares, about 4 ms per request here; under WSGI a request is one hop to a worker thread
+(robotide.wsgi_bridge).
 """
 
 import os
 
-from a2wsgi import WSGIMiddleware
 from django.core.wsgi import get_wsgi_application
 
+from robotide.wsgi_bridge import OneHopWSGI
+
 os.environ.setdefault("DJANGO_SETTINGS_MODULE", "robotide.settings")
-django_http_app = WSGIMiddleware(get_wsgi_application(), workers=8)
+django_http_app = OneHopWSGI(get_wsgi_application(), workers=8)
 
 from channels.auth import AuthMiddlewareStack  # noqa: E402
 from channels.routing import ProtocolTypeRouter, URLRouter  # noqa: E402
