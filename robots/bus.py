@@ -12,7 +12,7 @@ from asgiref.sync import async_to_sync
 from channels.layers import get_channel_layer
 from django.utils.translation import gettext as _
 
-from robots.models import agent_channel
+from robots.models import agent_channel, robot_group
 
 log = logging.getLogger(__name__)
 MANAGER_CHANNEL = "agents.manager"
@@ -48,6 +48,16 @@ async def hand_over_run(robot_name: str, message: dict, consoles: str) -> None:
             )
         except Exception:  # the channel layer away: the agent's turn says so
             log.warning("run %s: could not tell the consoles", message["run_id"], exc_info=True)
+
+
+async def tell_run_changed(run_id: int, robot_name: str) -> None:
+    """A run's state changed outside its agent (it failed to start, or was lost): its page,
+    the run lists and its robot's page hear of it."""
+    layer = get_channel_layer()
+    await layer.group_send(run_group(run_id), {"type": "run.state", "run_id": run_id})
+    changed = {"type": "runs.changed", "run_id": run_id, "robot": robot_name}
+    await layer.group_send(RUNS_GROUP, changed)
+    await layer.group_send(robot_group(robot_name), {"type": "robot.runs", "robot": robot_name})
 
 
 async def ask_agent(robot_name: str, type: str, timeout: float = 3.0, **data) -> dict:
@@ -100,8 +110,21 @@ def blocking(coro_fn):
     return call
 
 
+def begin_soon(coro_fn, *args) -> None:
+    """``coro_fn(*args)`` begun on the server's loop from a view's thread and not waited for:
+    the thread goes on to its response while the loop does it (it must catch and log its own
+    errors: nobody reads its result). Where no server loop runs (a command, a test's client),
+    done before this returns."""
+    loop = _server_loop
+    if loop is None or not loop.is_running():
+        async_to_sync(coro_fn)(*args)
+    elif threading.get_ident() == getattr(loop, "_thread_id", None):
+        raise RuntimeError("begin_soon from the event loop's own thread")
+    else:
+        asyncio.run_coroutine_threadsafe(coro_fn(*args), loop)
+
+
 tell_agent_sync = blocking(send_to_agent)
-hand_over_run_sync = blocking(hand_over_run)
 ask_agent_sync = blocking(ask_agent)
 announce_robot_sync = blocking(announce_robot)
 reconfigure_sync = blocking(reconfigure)

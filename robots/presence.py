@@ -17,14 +17,12 @@ import logging
 from datetime import timedelta
 
 from channels.db import database_sync_to_async
-from channels.layers import get_channel_layer
 from django.conf import settings
 from django.db.models import Q
 from django.utils import timezone
 
 from programs.models import Run
-from robots.bus import RUNS_GROUP, run_group
-from robots.models import robot_group
+from robots.bus import tell_run_changed
 
 log = logging.getLogger(__name__)
 
@@ -83,7 +81,6 @@ def sweep_unclaimed(seen: dict[int, float], now: float) -> list[tuple[int, str]]
 
 async def watch() -> None:
     """Until cancelled: sweep every heartbeat period, and tell the pages of runs lost."""
-    layer = get_channel_layer()
     unclaimed: dict[int, float] = {}
     while True:
         try:
@@ -95,10 +92,7 @@ async def watch() -> None:
             for run_id, robot in failed:
                 log.warning("run %s failed: the agent of robot %s did not take it", run_id, robot)
             for run_id, robot in ended + failed:
-                await layer.group_send(run_group(run_id), {"type": "run.state", "run_id": run_id})
-                changed = {"type": "runs.changed", "run_id": run_id, "robot": robot}
-                await layer.group_send(RUNS_GROUP, changed)
-                await layer.group_send(robot_group(robot), {"type": "robot.runs", "robot": robot})
+                await tell_run_changed(run_id, robot)
         except Exception:  # the database or Redis away for a moment: try again next time
             log.exception("presence watch failed")
         await asyncio.sleep(settings.AGENT_HEARTBEAT)

@@ -1,6 +1,9 @@
 """Handing runs to robots: a run is data (programs.models); starting and stopping one is a
 message to its robot's agent, or a step of the robot's queue."""
 
+import logging
+
+from channels.db import database_sync_to_async
 from channels.exceptions import ChannelFull
 from django.core.exceptions import PermissionDenied
 from django.db import transaction
@@ -8,8 +11,10 @@ from django.utils.translation import gettext as _
 
 from programs.models import Program, Run
 from robots import run_queue
-from robots.bus import console_group, hand_over_run_sync, tell_agent_sync
+from robots.bus import begin_soon, console_group, hand_over_run, tell_agent_sync, tell_run_changed
 from robots.models import Robot
+
+log = logging.getLogger(__name__)
 
 
 def start_run(program: Program, robot: Robot, user, args=()) -> Run:
@@ -40,13 +45,28 @@ def start_run(program: Program, robot: Robot, user, args=()) -> Run:
 
 
 def _hand_to_agent(run: Run, message: dict) -> None:
+    # Not waited for: the response is made while the loop hands the run over and its agent
+    # starts it (a start's first line came after the view's wait for the loop, before).
+    begin_soon(_hand_over, run, message)
+
+
+async def _hand_over(run: Run, message: dict) -> None:
+    """The run to its agent and its owner's consoles; one that cannot be handed over has
+    failed, and its viewers are told."""
+    robot = run.robot.name
     try:
-        hand_over_run_sync(run.robot.name, message, console_group(run.program_id, run.owner_id))
+        await hand_over_run(robot, message, console_group(run.program_id, run.owner_id))
+        return
     except ChannelFull:
         # Nobody has taken the robot's commands for a long while: say so instead of waiting.
-        fail_to_start(run, f"the agent of robot {run.robot.name!r} is not taking commands")
+        why = f"the agent of robot {robot!r} is not taking commands"
     except Exception as exc:  # the channel layer itself is away (Redis down)
-        fail_to_start(run, f"the robot's agent cannot be reached ({type(exc).__name__})")
+        why = f"the robot's agent cannot be reached ({type(exc).__name__})"
+    try:
+        await database_sync_to_async(fail_to_start)(run, why)
+        await tell_run_changed(run.pk, robot)
+    except Exception:
+        log.exception("run %s could not start (%s), and could not be marked so", run.pk, why)
 
 
 def fail_to_start(run: Run, why: str) -> None:
