@@ -20,14 +20,6 @@ LIST_REFRESH_INTERVAL = 0.5
 log = logging.getLogger(__name__)
 
 
-@database_sync_to_async
-def _get_run(user, run_id):
-    try:
-        return get_run_for_user(user, run_id)
-    except Http404:
-        return None
-
-
 def skipped_line(count: int) -> str:
     text = ngettext(
         "… %(count)s line(s) not shown live: the full log has them (Download log)",
@@ -61,16 +53,17 @@ class RunConsumer(AsyncWebsocketConsumer):
         await self.send(first)
         await self.send_status()
 
-    @database_sync_to_async
-    def see_run(self, run_id: int, page_offset: int | None) -> str | None:
-        """The run if this viewer may see it, and what the page lacks of its log (one trip
-        to a worker thread: a start's first line waits for this)."""
+    def seen(self, run_id: int, page_offset: int | None) -> str | None:
+        """The run if this viewer may see it, and what the page lacks of its log."""
         try:
             self.run = get_run_for_user(self.scope["user"], run_id)
         except Http404:
             return None
         self.place_of = places_in(self.run)
         return self.catch_up(page_offset)
+
+    # One trip to a worker thread: a start's first line waits for it.
+    see_run = database_sync_to_async(seen)
 
     def catch_up(self, page_offset: int | None) -> str:
         """What the page lacks: the lines after those it was rendered with, else a new tail."""
@@ -119,20 +112,29 @@ class RunConsumer(AsyncWebsocketConsumer):
         try:
             while self._state_stale and self.group is not None:
                 self._state_stale = False
-                run = await _get_run(self.scope["user"], self.run.pk)
-                if run is None:  # access taken away
+                html = await self.fresh_status()
+                if html is None:  # access taken away
                     await self.close()
                     return
-                self.run = run
-                await self.send_status()
+                await self.send(html)
         except Exception:
             log.exception("run %s: could not send its state", self.run.pk)
 
+    @database_sync_to_async
+    def fresh_status(self) -> str | None:
+        """The run as it is now, rendered: one trip to a worker thread (a start's first lines
+        come while it is made)."""
+        try:
+            self.run = get_run_for_user(self.scope["user"], self.run.pk)
+        except Http404:
+            return None
+        return self.status_html()
+
+    def status_html(self) -> str:
+        return render_to_string("runs/_status.html", {"run": self.run, "oob": True})
+
     async def send_status(self):
-        html = await database_sync_to_async(render_to_string)(
-            "runs/_status.html", {"run": self.run, "oob": True}
-        )
-        await self.send(html)
+        await self.send(await database_sync_to_async(self.status_html)())
 
 
 class ConsoleConsumer(RunConsumer):
@@ -169,15 +171,21 @@ class ConsoleConsumer(RunConsumer):
             await self.channel_layer.group_discard(self.group, self.channel_name)
         self.group = run_group(event["run_id"])
         await self.channel_layer.group_add(self.group, self.channel_name)
-        lines = await self.see_run(event["run_id"], None)
-        if lines is None:
+        html = await self.see_attached(event["run_id"])
+        if html is None:
             await self.channel_layer.group_discard(self.group, self.channel_name)
             self.group = None
             return
-        html = await database_sync_to_async(render_to_string)(
-            "programs/_console.html", {"run": self.run, "lines": lines, "attached": True}
-        )
         await self.send(html)
+
+    @database_sync_to_async
+    def see_attached(self, run_id: int) -> str | None:
+        """The console showing the run, if this viewer may see it (one trip, as see_run)."""
+        lines = self.seen(run_id, None)
+        if lines is None:
+            return None
+        context = {"run": self.run, "lines": lines, "attached": True}
+        return render_to_string("programs/_console.html", context)
 
 
 class RunListConsumer(AsyncWebsocketConsumer):
