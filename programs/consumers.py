@@ -14,6 +14,7 @@ from django.utils.translation import ngettext
 from programs.access import get_program_for_user, get_run_for_user
 from programs.runlog import count_lines_between, lines_after, places_in, render_lines, tail
 from programs.views import run_tables_context
+from robotide.ws_user import user_of
 from robots.bus import RUNS_GROUP, console_group, run_group
 
 LIST_REFRESH_INTERVAL = 0.5
@@ -192,7 +193,7 @@ class RunListConsumer(AsyncWebsocketConsumer):
     """The running and recent runs tables, re-rendered for this user when a run changes."""
 
     async def connect(self):
-        if not self.scope["user"].is_authenticated:
+        if not (await user_of(self.scope)).is_authenticated:
             await self.close(code=4401)
             return
         self.robot = query_param(self.scope, "robot") or None

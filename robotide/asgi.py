@@ -26,6 +26,7 @@ from programs.consumers import ConsoleConsumer, RunConsumer, RunListConsumer  # 
 from robotide.language import WebsocketLanguage  # noqa: E402
 from robotide.security import SameOriginWebsocket  # noqa: E402
 from robotide.served_by import ServedBy  # noqa: E402
+from robotide.ws_user import LazyAuthMiddlewareStack  # noqa: E402
 from robots.camera import CameraStream  # noqa: E402
 from robots.consumers import RobotConsumer  # noqa: E402
 
@@ -47,7 +48,7 @@ application = ServedBy(
             "http": URLRouter(http_urlpatterns),
             "websocket": SameOriginWebsocket(
                 AllowedHostsOriginValidator(
-                    AuthMiddlewareStack(WebsocketLanguage(URLRouter(websocket_urlpatterns)))
+                    LazyAuthMiddlewareStack(WebsocketLanguage(URLRouter(websocket_urlpatterns)))
                 )
             ),
         }

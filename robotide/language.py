@@ -77,30 +77,26 @@ def language_from_headers(headers: dict[str, str]) -> str:
     return translation.get_language_from_request(request)
 
 
+def account_language(session, user) -> str | None:
+    """A websocket's account language: as sign-in kept it in the session (loaded already to
+    find the user), else as stored."""
+    if not user.is_authenticated:
+        return None
+    code = session.get(SESSION_KEY)
+    if code is None:  # a session from before sign-ins kept it
+        return stored_language(user)
+    return code if supported(code) else None
+
+
 class WebsocketLanguage:
-    """A websocket's fragments in its page's language: the account's, else the browser's. Inside
-    AuthMiddlewareStack (it needs scope["user"]); activated for the connection's whole task."""
+    """A websocket's fragments in its page's language: the browser's here (its switcher's
+    cookie, then Accept-Language), activated for the connection's whole task; the account's
+    wins once its user is read (robotide.ws_user)."""
 
     def __init__(self, inner):
         self.inner = inner
 
     async def __call__(self, scope, receive, send):
         headers = {k.decode("latin-1"): v.decode("latin-1") for k, v in scope.get("headers", [])}
-        stored = await self.account_language(scope)
-        translation.activate(stored or language_from_headers(headers))
+        translation.activate(language_from_headers(headers))
         return await self.inner(scope, receive, send)
-
-    @staticmethod
-    async def account_language(scope) -> str | None:
-        from channels.db import database_sync_to_async
-
-        user = scope.get("user")
-        if user is None or not user.is_authenticated:
-            return None
-        # AuthMiddlewareStack has loaded the session to find the user: read it as loaded,
-        # with no trip to a worker thread.
-        loaded = getattr(scope.get("session"), "_session_cache", None)
-        if loaded is not None and SESSION_KEY in loaded:
-            code = loaded[SESSION_KEY]
-            return code if supported(code) else None
-        return await database_sync_to_async(stored_language)(user)

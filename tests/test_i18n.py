@@ -187,30 +187,6 @@ def test_a_websocket_speaks_its_browsers_language():
     assert language_from_headers(cookie) == "pt-br"
 
 
-@pytest.mark.django_db(transaction=True)
-async def test_a_websockets_fragments_are_in_its_users_language():
-    """Live fragments (run states, sensors) render in the connection's task: the account's
-    language there too, else the browser's."""
-    from asgiref.sync import sync_to_async
-    from django.contrib.auth.models import AnonymousUser
-    from django.utils import translation
-
-    from robotide.language import WebsocketLanguage
-
-    seen = []
-
-    async def consumer(scope, receive, send):
-        seen.append(translation.get_language())
-
-    app = WebsocketLanguage(consumer)
-    portuguese = [(b"accept-language", b"pt-BR,pt;q=0.9")]
-    await app({"type": "websocket", "headers": portuguese, "user": AnonymousUser()}, None, None)
-    bia = await sync_to_async(User.objects.create_user)("bia", password="pw-bia-123")
-    await sync_to_async(LanguagePreference.objects.create)(user=bia, language="en")
-    await app({"type": "websocket", "headers": portuguese, "user": bia}, None, None)
-    assert seen == ["pt-br", "en"]
-
-
 def test_a_signed_in_page_asks_the_database_nothing_more_for_the_language(alice):
     from django.db import connection
     from django.test.utils import CaptureQueriesContext
@@ -227,26 +203,16 @@ def test_a_signed_in_page_asks_the_database_nothing_more_for_the_language(alice)
     assert "languagepreference" not in asked
 
 
-async def test_a_websocket_reads_the_language_from_the_loaded_session():
-    """No database here (no django_db mark): the session AuthMiddlewareStack loaded says it."""
-    from django.utils import translation
+def test_a_websocket_reads_the_language_from_the_loaded_session(django_assert_num_queries):
+    """The session was loaded to find the user: the language costs no query (tests/test_ws_user.py
+    has the websockets themselves)."""
+    from robotide.language import SESSION_KEY, account_language
 
-    from robotide.language import SESSION_KEY, WebsocketLanguage
-
-    class Session:
-        _session_cache = {SESSION_KEY: "pt-br"}
-
-    seen = []
-
-    async def consumer(scope, receive, send):
-        seen.append(translation.get_language())
-
-    english = [(b"accept-language", b"en")]
-    user = User(username="carla", pk=7)
-    await WebsocketLanguage(consumer)(
-        {"type": "websocket", "headers": english, "user": user, "session": Session()}, None, None
-    )
-    assert seen == ["pt-br"]
+    carla = User(username="carla", pk=7)
+    with django_assert_num_queries(0):
+        assert account_language({SESSION_KEY: "pt-br"}, carla) == "pt-br"
+        assert account_language({SESSION_KEY: ""}, carla) is None  # none chosen
+        assert account_language({SESSION_KEY: "xx"}, carla) is None  # not offered
 
 
 def test_the_scripts_catalog_is_not_rebuilt_for_every_page():
