@@ -10,7 +10,7 @@ from channels.exceptions import ChannelFull
 from channels.layers import get_channel_layer
 from django.contrib.auth.models import User
 
-from programs.models import Program, Run
+from programs.models import Program
 from robots.bus import RUNS_GROUP
 from robots.models import Robot, agent_channel
 from robots.runs import start_run
@@ -102,12 +102,13 @@ def test_a_run_its_agent_does_not_take_fails_and_its_viewers_are_told(lab, serve
     on(server_loop, fill(agent_channel(robot.name)))  # nobody has taken its commands
     viewer = on(server_loop, listen(RUNS_GROUP))
     run = start_run(program, robot, user)
-    wait_for(lambda: Run.objects.get(pk=run.pk).state == "failed", what="the run failed")
-    run.refresh_from_db()
-    assert run.reason == "could not start: the agent of robot 'arm' is not taking commands"
-    assert run.ended is not None
+    # The run list is told once the row says so; the row is read after (this thread reading
+    # while the loop's worker writes would lock the tests' shared-cache SQLite table).
     told = wait_for(lambda: on(server_loop, events(viewer)), what="the run list told")
     assert {"type": "runs.changed", "run_id": run.pk, "robot": "arm"} in told
+    run.refresh_from_db()
+    assert run.state == "failed" and run.ended is not None
+    assert run.reason == "could not start: the agent of robot 'arm' is not taking commands"
 
 
 def test_without_a_server_loop_it_is_handed_over_before_start_run_returns(lab):
