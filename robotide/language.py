@@ -50,12 +50,10 @@ class UserLanguageMiddleware:
 
 
 def session_language(request) -> str | None:
-    if not request.user.is_authenticated:
-        return None
-    if SESSION_KEY not in request.session:  # a session from before sign-ins kept it
+    if request.user.is_authenticated and SESSION_KEY not in request.session:
+        # A session from before sign-ins kept it: kept now, for its next pages.
         request.session[SESSION_KEY] = stored_language(request.user) or ""
-    code = request.session[SESSION_KEY]
-    return code if supported(code) else None
+    return account_language(request.session, request.user)
 
 
 def stored_language(user) -> str | None:
@@ -78,8 +76,8 @@ def language_from_headers(headers: dict[str, str]) -> str:
 
 
 def account_language(session, user) -> str | None:
-    """A websocket's account language: as sign-in kept it in the session (loaded already to
-    find the user), else as stored."""
+    """The account's language: as sign-in kept it in the session (a websocket's was loaded
+    already to find its user), else as stored."""
     if not user.is_authenticated:
         return None
     code = session.get(SESSION_KEY)
