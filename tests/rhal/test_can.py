@@ -574,7 +574,8 @@ async def test_after_the_noise_the_base_still_drives(robot, base, noise_bus):
                                    is_extended_id=False))  # fmt: skip
     await until(lambda: robot.errors == before + 1)  # all of it has been heard
     # The drives' own TPDOs at the next SYNC put things right.
-    await until(lambda: _when(robot, lambda r: r["drives"]["left"]["state"] == "OPERATION ENABLED"))
+    # Both drives: the left's TPDO may come in before the right's.
+    await until(lambda: _when(robot, _both_enabled))
     await robot.drive(0.1, 0.0)
     await until(lambda: base.left.velocity != 0)
 
@@ -818,6 +819,11 @@ def _next_frame(bus, ident, timeout=3.0):
         if frame is not None and frame.arbitration_id == ident:
             return frame
     raise AssertionError(f"no frame 0x{ident:X}")
+
+
+def _both_enabled(readings) -> bool:
+    drives = readings["drives"]
+    return all(drives[side]["state"] == "OPERATION ENABLED" for side in ("left", "right"))
 
 
 async def _when(bot, condition):
