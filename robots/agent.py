@@ -86,6 +86,23 @@ class ActiveRun:
     process: RunProcess
     watcher: asyncio.Task | None = field(default=None, repr=False)
     user: str = ""  # who started it, as the control lease names it
+    # Its claim (Run.claim): True once it is this agent's to run. The program starts while
+    # it is asked; nothing of the robot is its until the answer is yes.
+    claimed: asyncio.Future | None = field(default=None, repr=False)
+
+    def confirmed_now(self) -> bool:
+        """Its claim has been answered yes."""
+        claim = self.claimed
+        if claim is None:
+            return True
+        return claim.done() and not claim.cancelled() and not claim.exception() and claim.result()
+
+    async def confirmed(self) -> bool:
+        """Its claim's answer, waited for (a claim that failed is a no)."""
+        if self.claimed is not None and not self.claimed.done():
+            with contextlib.suppress(Exception):
+                await asyncio.shield(self.claimed)
+        return self.confirmed_now()
 
 
 class RobotAgent:
@@ -399,11 +416,12 @@ class RobotAgent:
         if await self.queue.waits(message):  # the robot is busy: it waits its turn
             return
         # Only a run still waiting to start: not one marked lost or failed meanwhile. Asked
-        # while its box is made; the program waits for the answer (a database round trip
-        # less on every start).
+        # while its box is given the program, which does not wait for the answer (a database
+        # round trip, on the agents' busy thread): its token and its MAVLink endpoint do
+        # (ActiveRun.confirmed), and a no ends it.
         claimed = asyncio.ensure_future(database_sync_to_async(Run.claim)(run_id))
         try:
-            active = await self._launch(run_id, message, partial(self._may_start, run_id, claimed))
+            active = await self._launch(run_id, message, claimed, partial(self._may_start, run_id))
         except (
             LanguageUnavailable, launcher.LauncherUnavailable, IsolationUnavailable,
             ValueError, OSError,
@@ -411,21 +429,28 @@ class RobotAgent:
             if await claimed:
                 await self._end_run(run_id, "failed", None, f"could not start: {exc}")
             return
+        if not await active.confirmed():
+            if claimed.exception() is not None:
+                log.error("agent %s: run %s could not be claimed", self.name, run_id,
+                          exc_info=claimed.exception())  # fmt: skip
+                active.process.kill("could not start: internal error (see the server's log)",
+                                    "failed")  # fmt: skip
+            else:
+                active.process.kill("it no longer waited to start", NOT_OURS)
+            return
         if active.process.started:
             await database_sync_to_async(Run.mark_running)(run_id, active.process.pid)
             self._run_changed(run_id)
 
-    async def _may_start(self, run_id: int, claimed: asyncio.Future) -> tuple[str, str] | None:
+    async def _may_start(self, run_id: int) -> tuple[str, str] | None:
         """The gate of a run's box: None lets its program run."""
-        if not await claimed:
-            return NOT_OURS, "it no longer waited to start"
         active = self.runs.get(run_id)
         if run_id in self.cancelled or (active and active.process.stop_requested):
             self.cancelled.discard(run_id)
             return "stopped", "stopped by user before it started"
         return None
 
-    async def _launch(self, run_id: int, message: dict, gate=None) -> ActiveRun:
+    async def _launch(self, run_id: int, message: dict, claimed=None, gate=None) -> ActiveRun:
         if (why := messages.check_filename(message["filename"])) is not None:
             raise ValueError(why)
         if self.isolation is None:
@@ -435,12 +460,12 @@ class RobotAgent:
         kind = self._box_kind(program_env)
         process = await self.boxes.take(kind, f"run-{run_id}")
         try:
-            return await self._begin(run_id, message, language, process, program_env, gate)
+            return await self._begin(run_id, message, language, process, program_env, claimed, gate)
         except BaseException:
             await discard(process)  # its cgroup and descriptors go with it
             raise
 
-    async def _begin(self, run_id, message, language, process, program_env, gate):
+    async def _begin(self, run_id, message, language, process, program_env, claimed, gate):
         """The program in its box, as the run's process, registered before it starts."""
         directory = settings.RUNS_DIR / str(run_id)
         uid = self.isolation.uid(run_id, str(settings.DATA_DIR))
@@ -469,7 +494,7 @@ class RobotAgent:
             self.isolation.program_command(argv, uid), env,
         )  # fmt: skip
         # The token is good before the program starts: it may call auth at once.
-        active = ActiveRun(run_id, token, process, user=message.get("user", ""))
+        active = ActiveRun(run_id, token, process, user=message.get("user", ""), claimed=claimed)
         self.runs[run_id] = active
         self.tokens[token] = active
         for served in process.box.served:

@@ -273,6 +273,8 @@ class RunLink:
         active = agent.runs.get(self.run_id)
         if active is None or agent.tokens.get(active.token) is not active:
             return False  # not begun, ended, or emergency-stopped
+        if not active.confirmed_now():
+            return False  # its claim is not answered yet (or was a no)
         if active.process.stop_requested:
             return False  # asked to stop: it may clean up, not command
         try:  # the first command takes a free lease, as drive() does

@@ -109,7 +109,7 @@ class RobotApi:
 
     async def handle(self, session: Session, method: str, params):
         if method == "auth":
-            return self.auth(session, params)
+            return await self.auth(session, params)
         active = session.run
         if active is None:
             raise RpcError(UNAUTHORIZED, "not authenticated: call auth with $ROBOT_TOKEN first")
@@ -132,10 +132,12 @@ class RobotApi:
         except ValueError as exc:
             raise RpcError(INVALID_PARAMS, str(exc)) from None
 
-    def auth(self, session: Session, params):
+    async def auth(self, session: Session, params):
         (token,) = bind_params(params, ("token",), 1)
         active = self.agent.tokens.get(token) if isinstance(token, str) else None
-        if active is None:
+        # A program may call at once: its run's claim may still be on its way (answered
+        # straight from data_received once it has come, as every quick method).
+        if active is None or not await active.confirmed():
             raise RpcError(UNAUTHORIZED, "invalid token: it belongs to no running program")
         session.run = active
         return {"robot": self.agent.name, "run": active.run_id}

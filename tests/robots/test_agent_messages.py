@@ -5,7 +5,6 @@ A real agent on the sim robot, in this process, takes forged messages from the i
 channel layer as it would from Redis: it refuses them with a clear reply and acts on none."""
 
 import asyncio
-import contextlib
 
 import pytest
 from channels.db import database_sync_to_async
@@ -14,7 +13,6 @@ from django.conf import settings
 from django.contrib.auth.models import User
 
 from programs.models import Program, Run
-from robots.agent import RobotAgent
 from robots.models import Robot, agent_channel
 
 pytestmark = pytest.mark.django_db(transaction=True)
@@ -23,16 +21,8 @@ REPLY_TIMEOUT = 5.0
 
 
 @pytest.fixture
-async def agent():
-    await get_channel_layer().flush()  # nothing other tests left for an agent named sim
-    await database_sync_to_async(Robot.objects.create)(name="sim", url="sim://")
-    agent = RobotAgent("sim")
-    task = asyncio.create_task(agent.serve())
-    await asyncio.wait_for(agent.ready.wait(), 15)
-    yield agent
-    task.cancel()
-    with contextlib.suppress(asyncio.CancelledError):
-        await task
+def agent(sim_agent):
+    return sim_agent
 
 
 async def ask(message: dict) -> dict:

@@ -1,0 +1,113 @@
+"""A run's program starts while its claim (Run.claim, a database write) is on its way; the
+robot is not its until the claim is answered yes, and a no ends it.
+
+A real agent on the sim robot, in this process; the claim is held back (the real one, run
+once a test lets it go) so that the program is surely up before the answer."""
+
+import asyncio
+import threading
+import time
+
+import pytest
+from channels.db import database_sync_to_async
+from channels.layers import get_channel_layer
+from django.conf import settings
+
+from programs.models import Run
+from robots.models import agent_channel
+from tests.robots.test_agent_messages import a_run_waiting_to_start
+
+pytestmark = pytest.mark.django_db(transaction=True)
+
+PROGRAM = """\
+import time
+import robot
+print("up", flush=True)
+bot = robot.Robot()  # auth: answered once the claim is
+bot.drive(0.2, 0.0)
+print("drove", flush=True)
+time.sleep(30)
+"""
+
+
+@pytest.fixture
+def held_claim(monkeypatch):
+    """Run.claim waits until `let_go` is set, then asks the database as it would have."""
+    let_go = threading.Event()
+    claim = Run.claim
+
+    def held(run_id):
+        let_go.wait(30)
+        return claim(run_id)
+
+    monkeypatch.setattr(Run, "claim", held)
+    yield let_go
+    let_go.set()
+
+
+async def start(run: Run) -> None:
+    """The web tier's run.start for `run`."""
+    message = {"type": "run.start", "run_id": run.pk, "language": "python", "source": PROGRAM,
+               "filename": "main.py", "args": [], "user": "mallory"}  # fmt: skip
+    await get_channel_layer().send(agent_channel("sim"), message)
+
+
+def log_of(run: Run) -> str:
+    path = settings.RUNS_DIR / str(run.pk) / "output.log"
+    return path.read_text() if path.exists() else ""
+
+
+async def until(condition, timeout: float = 15.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        await asyncio.sleep(0.02)
+
+
+async def until_async(read, value, timeout: float = 15.0) -> None:
+    deadline = time.monotonic() + timeout
+    while (seen := await read()) != value:
+        assert time.monotonic() < deadline, f"timed out: {seen!r}, not {value!r}"
+        await asyncio.sleep(0.02)
+
+
+async def state_of(run: Run) -> str:
+    await database_sync_to_async(run.refresh_from_db)()
+    return run.state
+
+
+async def velocity(agent) -> float:
+    return (await agent.driver.sensors())["velocity"]["linear"]
+
+
+async def test_the_program_is_up_before_its_claim_is_answered_and_drives_after(
+    sim_agent, held_claim
+):
+    run = await a_run_waiting_to_start()
+    await start(run)
+    await until(lambda: "o up" in log_of(run))  # on the old code: waits for the claim
+    await asyncio.sleep(0.5)  # its auth meanwhile: unanswered
+    assert "drove" not in log_of(run)
+    assert sim_agent.lease.holder is None and await velocity(sim_agent) == 0
+    held_claim.set()
+    await until(lambda: "o drove" in log_of(run))
+    assert await velocity(sim_agent) == pytest.approx(0.2)
+    await until_async(lambda: state_of(run), Run.State.RUNNING)
+    sim_agent.stop_run(run.pk, "test over")
+    await until(lambda: run.pk not in sim_agent.runs)
+
+
+async def test_a_claim_answered_no_ends_the_program_before_the_robot_is_its(sim_agent, held_claim):
+    run = await a_run_waiting_to_start()
+    await start(run)
+    await until(lambda: "o up" in log_of(run))
+    # Meanwhile the web tier failed the run (its page was told it could not start).
+    await asyncio.to_thread(
+        lambda: Run.objects.filter(pk=run.pk).update(state=Run.State.FAILED, reason="gone")
+    )
+    held_claim.set()
+    await until(lambda: run.pk not in sim_agent.runs)
+    assert "drove" not in log_of(run)
+    assert sim_agent.lease.holder is None and await velocity(sim_agent) == 0
+    await database_sync_to_async(run.refresh_from_db)()
+    assert (run.state, run.reason) == (Run.State.FAILED, "gone")  # its state stays
