@@ -3,6 +3,11 @@
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
+# Two test processes (pytest-xdist): most of the suite waits on servers, browsers and robots'
+# peers, and one process keeps a two-core machine about half busy. Modules whose tests share
+# something of the machine's stay in one of them (tests/conftest.py, TOGETHER).
+# `make test PYTEST_PARALLEL=` runs the suite in one process.
+PYTEST_PARALLEL ?= -n 2
 
 .PHONY: run test lint bench bench-deps fleet fleet-secrets clean
 
@@ -21,7 +26,7 @@ test: $(BIN)/robotide
 	./scripts/install-build-deps.sh
 	$(BIN)/pip install --quiet -e '.[ldap]'
 	$(BIN)/ruff check .
-	$(BIN)/pytest
+	$(BIN)/pytest $(PYTEST_PARALLEL)
 
 lint: $(BIN)/robotide
 	$(BIN)/ruff check .

@@ -62,6 +62,7 @@ class Appliance:
             self.env.pop("REDIS_URL", None)
             self.env.pop("DATABASE_URL", None)
         self.database = None
+        self.redis_db: tuple[int, str] | None = None
 
     # -- life cycle ---------------------------------------------------------------------------
 
@@ -77,7 +78,8 @@ class Appliance:
     def _start(self) -> "Appliance":
         if self.mode == "split":
             self._create_database()
-            self.env["REDIS_URL"] = f"{REDIS}/{_redis_db()}"
+            self.redis_db = claim_redis_db()
+            self.env["REDIS_URL"] = f"{REDIS}/{self.redis_db[0]}"
         self.server = self._spawn("up", "--bind", f"127.0.0.1:{self.port}")
         wait_for(lambda: httpx.get(f"{self.url}/accounts/login/").status_code == 200,
                  what="the web server")  # fmt: skip
@@ -111,6 +113,9 @@ class Appliance:
                 proc.kill()
         if self.database:
             self._drop_database()
+        if self.redis_db:
+            release_redis_db(*self.redis_db)
+            self.redis_db = None
 
     def logs(self) -> str:
         return "\n".join(p.read_text() for p in sorted(self.data_dir.glob("*.log")))
@@ -185,13 +190,31 @@ class Appliance:
         return response.json()
 
 
-def _redis_db() -> int:
-    # A database of its own per run keeps parallel test sessions apart; flushed before use.
+REDIS_DBS = range(7, 16)  # Redis's default 16 databases; 0-6 are left to others
+REDIS_CLAIM_SECONDS = 3600  # a claim a killed test session left behind lapses
+
+
+def claim_redis_db() -> tuple[int, str]:
+    """A Redis database of its own, flushed: split appliances of parallel test workers and
+    sessions never share one (two agents named sim would take each other's messages).
+    Claimed by a key in database 0; returns it and the claim's token (release_redis_db)."""
     import redis
 
-    db = 7 + (os.getpid() % 8)
-    redis.Redis.from_url(f"{REDIS}/{db}").flushdb()
-    return db
+    token = uuid.uuid4().hex
+    claims = redis.Redis.from_url(f"{REDIS}/0")
+    for db in REDIS_DBS:
+        if claims.set(f"robotide-test-db:{db}", token, nx=True, ex=REDIS_CLAIM_SECONDS):
+            redis.Redis.from_url(f"{REDIS}/{db}").flushdb()
+            return db, token
+    raise RuntimeError(f"every Redis database {REDIS_DBS[0]}-{REDIS_DBS[-1]} is claimed")
+
+
+def release_redis_db(db: int, token: str) -> None:
+    import redis
+
+    claims = redis.Redis.from_url(f"{REDIS}/0")
+    if claims.get(f"robotide-test-db:{db}") == token.encode():
+        claims.delete(f"robotide-test-db:{db}")
 
 
 def cookie_header(client: httpx.Client) -> str:

@@ -10,6 +10,9 @@ pytest_plugins = ["tests.robot_api_server"]
 
 @pytest.fixture(autouse=True)
 def _test_settings(settings, tmp_path):
+    # A data folder of its own: what the agent names after it (its runs' accounts, its
+    # cgroups) is not another test process's, whose run 3 is not this one's.
+    settings.DATA_DIR = tmp_path
     settings.RUNS_DIR = tmp_path / "runs"
     settings.PASSWORD_HASHERS = ["django.contrib.auth.hashers.MD5PasswordHasher"]
     # Any free port: tests run side by side, and never listen beyond loopback.
@@ -30,6 +33,29 @@ def any_appliance(request, tmp_path_factory):
     app.start()
     yield app
     app.stop()
+
+
+# Modules whose tests share something of the machine's (one OS account and its clone, a fleet's
+# servers made once for the module) run in one test process when the suite runs in several
+# (`make test`: pytest-xdist); every other test goes wherever a process is free. pytest-xdist's
+# own xdist_group marks do nothing with pytest 9.2 (its node ids changed), hence this.
+TOGETHER = {
+    "tests/e2e/test_ordinary_user.py",
+    "tests/fleet/test_fleet.py",
+    "tests/fleet/test_passwords.py",
+}
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    from xdist.scheduler import LoadScopeScheduling
+
+    class SomeModulesTogether(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            module = nodeid.split("::", 1)[0]
+            return module if module in TOGETHER else nodeid
+
+    return SomeModulesTogether(config, log)
 
 
 def in_ci() -> bool:

@@ -24,7 +24,7 @@ import yaml
 from redis.backoff import NoBackoff
 from redis.retry import Retry
 
-from tests.appliance import POSTGRES, REDIS, ROOT, wait_for
+from tests.appliance import POSTGRES, REDIS, ROOT, claim_redis_db, release_redis_db, wait_for
 
 PROBE = (
     "import os, time\n"
@@ -174,13 +174,15 @@ def test_servers_of_your_own_are_used_as_given(tmp_path_factory):
     (their passwords, if any, are the operator's). Here, the test machine's."""
     data = tmp_path_factory.mktemp("own")
     name = f"robotide_fleet_{uuid.uuid4().hex[:8]}"
-    database, channels = f"{POSTGRES}/{name}", f"{REDIS}/9"
+    redis_db = claim_redis_db()
+    database, channels = f"{POSTGRES}/{name}", f"{REDIS}/{redis_db[0]}"
     run = FleetRun(data, FLEET_DATABASE_URL=database, FLEET_REDIS_URL=channels)
     try:
         assert run.start() == {"DATABASE_URL": database, "REDIS_URL": channels}
         assert not (data / "postgres").exists() and not (data / "redis").exists()
     finally:
         run.stop()
+        release_redis_db(*redis_db)
         with psycopg.connect(f"{POSTGRES}/postgres", autocommit=True) as conn:
             conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
 
