@@ -9,7 +9,7 @@ import ipaddress
 import os
 import secrets
 from pathlib import Path
-from urllib.parse import urlsplit
+from urllib.parse import parse_qsl, urlsplit
 
 import dj_database_url
 from django.core.exceptions import ImproperlyConfigured
@@ -145,7 +145,19 @@ if DATABASES["default"]["ENGINE"].endswith("sqlite3"):
 
 DEFAULT_AUTO_FIELD = "django.db.models.BigAutoField"
 
+
+def channel_namespace(url: str) -> str:
+    """Redis's publish/subscribe channels are the server's, whatever the database: robotides
+    given other databases of one server (REDIS_URL .../3) would take each other's messages.
+    The database's number goes into every channel's and group's name ("db3."; none for 0)."""
+    parts = urlsplit(url)
+    path_db = "" if parts.scheme == "unix" else parts.path.strip("/")
+    db = path_db or dict(parse_qsl(parts.query)).get("db", "")
+    return "" if db in ("", "0") else f"db{db}."
+
+
 REDIS_URL = os.environ.get("REDIS_URL", "")
+CHANNEL_NAMESPACE = channel_namespace(REDIS_URL)  # robots.models.agent_channel and the layer's
 if REDIS_URL:
     # Redis publish/subscribe: a message to a group goes out once and each process that has
     # members hands it to them, so a worker with 50 viewers of a run's log takes 1 message, not
@@ -155,7 +167,7 @@ if REDIS_URL:
     CHANNEL_LAYERS = {
         "default": {
             "BACKEND": "channels_redis.pubsub.RedisPubSubChannelLayer",
-            "CONFIG": {"hosts": [{"address": REDIS_URL}]},
+            "CONFIG": {"hosts": [{"address": REDIS_URL}], "prefix": f"asgi{CHANNEL_NAMESPACE}"},
         }
     }
 else:

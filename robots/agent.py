@@ -35,11 +35,11 @@ from programs.languages import CLIENTS_DIR, LanguageUnavailable, get_language
 from programs.models import Run
 from robots import messages, rpc
 from robots.bridges import Bridges
-from robots.bus import MANAGER_CHANNEL, RUNS_GROUP, run_group
+from robots.bus import RUNS_GROUP, run_group
 from robots.camera import CameraHub
 from robots.gateway import Gateway, RunLink
 from robots.lease import ControlLease, Holder, LeaseHeld
-from robots.models import Robot, RobotStop, agent_channel, robot_group
+from robots.models import Robot, RobotStop, agent_channel, manager_channel, robot_group
 from robots.robot_api import RobotApi
 from robots.run_queue import RunQueue
 from runbox import SYSTEM_PATH, cgroups, launcher, seccomp
@@ -870,7 +870,7 @@ class AgentManager:
         layer = get_channel_layer()
         while True:
             try:
-                message = await layer.receive(MANAGER_CHANNEL)
+                message = await layer.receive(manager_channel())
             except Exception:
                 log.exception("agent manager: channel layer receive failed; retrying")
                 await asyncio.sleep(RETRY_DELAY)

@@ -12,10 +12,9 @@ from asgiref.sync import async_to_sync
 from channels.layers import get_channel_layer
 from django.utils.translation import gettext as _
 
-from robots.models import agent_channel, robot_group
+from robots.models import agent_channel, manager_channel, robot_group
 
 log = logging.getLogger(__name__)
-MANAGER_CHANNEL = "agents.manager"
 RUNS_GROUP = "runs"
 
 
@@ -77,7 +76,7 @@ async def ask_agent(robot_name: str, type: str, timeout: float = 3.0, **data) ->
 
 
 async def announce_robot(robot_name: str) -> None:
-    await get_channel_layer().send(MANAGER_CHANNEL, {"type": "robot.added", "name": robot_name})
+    await get_channel_layer().send(manager_channel(), {"type": "robot.added", "name": robot_name})
 
 
 async def reconfigure(robot_name: str) -> None:

@@ -354,7 +354,12 @@ class SerialBridge(models.Model):
 
 
 def agent_channel(name: str) -> str:
-    return f"agent.{name}"
+    return f"{django_settings.CHANNEL_NAMESPACE}agent.{name}"
+
+
+def manager_channel() -> str:
+    """Where `robotide agent` hears of robots added (robots.bus.robot_added)."""
+    return f"{django_settings.CHANNEL_NAMESPACE}agents.manager"
 
 
 def robot_group(name: str) -> str:
