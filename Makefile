@@ -3,11 +3,10 @@
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
-# Two test processes (pytest-xdist): most of the suite waits on servers, browsers and robots'
-# peers, and one process keeps a two-core machine about half busy. Modules whose tests share
-# something of the machine's stay in one of them (tests/conftest.py, TOGETHER).
-# `make test PYTEST_PARALLEL=` runs the suite in one process.
-PYTEST_PARALLEL ?= -n 2
+# `make test PYTEST_PARALLEL="-n 2"`: the suite in two test processes (pytest-xdist), 16-20 min
+# instead of 26 on two cores. Not the default yet: under that load two timing-bound tests
+# (test_can's counter wrap, test_api_help's completion) failed once in three runs.
+PYTEST_PARALLEL ?=
 
 .PHONY: run test lint bench bench-deps fleet fleet-secrets clean
 
