@@ -156,6 +156,11 @@ def channel_namespace(url: str) -> str:
     return "" if db in ("", "0") else f"db{db}."
 
 
+def redis_layer_config(url: str) -> dict:
+    """The Redis channel layer's settings for REDIS_URL `url`."""
+    return {"hosts": [{"address": url}], "prefix": f"asgi{channel_namespace(url)}"}
+
+
 REDIS_URL = os.environ.get("REDIS_URL", "")
 CHANNEL_NAMESPACE = channel_namespace(REDIS_URL)  # robots.models.agent_channel and the layer's
 if REDIS_URL:
@@ -167,7 +172,7 @@ if REDIS_URL:
     CHANNEL_LAYERS = {
         "default": {
             "BACKEND": "channels_redis.pubsub.RedisPubSubChannelLayer",
-            "CONFIG": {"hosts": [{"address": REDIS_URL}], "prefix": f"asgi{CHANNEL_NAMESPACE}"},
+            "CONFIG": redis_layer_config(REDIS_URL),
         }
     }
 else:

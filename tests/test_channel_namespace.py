@@ -8,7 +8,7 @@ import contextlib
 import pytest
 from channels_redis.pubsub import RedisPubSubChannelLayer
 
-from robotide.settings import channel_namespace
+from robotide.settings import channel_namespace, redis_layer_config
 from robots.models import agent_channel
 from tests.appliance import REDIS, claim_redis_db, release_redis_db
 
@@ -39,9 +39,8 @@ class Robotide:
     REDIS_URL."""
 
     def __init__(self, url: str):
-        namespace = channel_namespace(url)
-        self.layer = RedisPubSubChannelLayer(hosts=[{"address": url}], prefix=f"asgi{namespace}")
-        self.agent = f"{namespace}agent.sim"
+        self.layer = RedisPubSubChannelLayer(**redis_layer_config(url))
+        self.agent = f"{channel_namespace(url)}agent.sim"
 
 
 async def heard(receiver: Robotide, sender: Robotide) -> bool:
