@@ -23,7 +23,8 @@ async def test_a_pioneer_gone_quiet_is_stopped_on_the_wire():
             await until(lambda: emulator.vel == 300)
             emulator.sip_interval = QUIET  # its SIPs stop; it still listens
             await until(lambda: not robot.connected, timeout=3.0)
-            assert (emulator.vel, emulator.rvel) == (0, 0)
+            # the link is marked lost before the stop is written; the emulator reads it after
+            await until(lambda: (emulator.vel, emulator.rvel) == (0, 0))
             with pytest.raises(RobotConnectionError, match="no data from the robot for 0.5 s"):
                 await robot.sensors()
     finally:
@@ -39,7 +40,7 @@ async def test_a_vehicle_gone_quiet_is_sent_a_zero_setpoint():
             await until(lambda: emulator.commanded() == (0.5, 0.0))
             emulator.heartbeat_period = QUIET
             await until(lambda: not robot.connected, timeout=3.0)
-            assert emulator.commanded() == (0.0, 0.0)
+            await until(lambda: emulator.commanded() == (0.0, 0.0))
             with pytest.raises(RobotConnectionError, match="no HEARTBEAT"):
                 await robot.sensors()
     finally:
