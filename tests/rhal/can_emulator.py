@@ -121,6 +121,9 @@ class Cia402Drive:
         self.boots = 0
         self.position = 0.0  # counts; an absolute encoder: it survives a power cycle
         self.syncs_seen = 0
+        self.answered = 0  # the last SYNC whose TPDOs this drive has sent
+        self.in_step_with: list[Cia402Drive] = []  # drives that answer each SYNC together
+        self.step = threading.Condition()  # shared with them
         self.nudges: list[tuple[int, float]] = []  # (at SYNC number, counts): hand turns
         self.online = False
         self.operational = False  # NMT OPERATIONAL
@@ -209,6 +212,9 @@ class Cia402Drive:
             self.online, self.operational = True, False
             self._tpdos, self._syncs = [], {}
             self.boots += 1
+        with self.step:  # powered again while the others ran: it joins their SYNC count
+            counts = [other.syncs_seen for other in self.in_step_with]
+            self.syncs_seen = self.answered = max(counts, default=self.syncs_seen)
         network.connect()
         node.nmt.state = "INITIALISING"  # sends the boot-up message
         node.nmt.state = "PRE-OPERATIONAL"
@@ -259,14 +265,18 @@ class Cia402Drive:
         self.operational = state == "OPERATIONAL"
 
     def _on_sync(self, can_id, data, timestamp) -> None:
-        if not self.operational:
-            return
         with self.lock:
-            self._advance()
+            # Every drive hears every SYNC, whatever its NMT state: counted alike, the drives
+            # apply a hand turn on the same one even when they were started a SYNC apart.
             self.syncs_seen += 1
-            for nudge in [n for n in self.nudges if n[0] <= self.syncs_seen]:
+            number = self.syncs_seen
+            for nudge in [n for n in self.nudges if n[0] <= number]:
                 self.nudges.remove(nudge)
                 self.position += nudge[1]
+            if not self.operational:
+                self._answered(number)
+                return
+            self._advance()
             values = self._values()
             due = []
             for pdo in self._tpdos:
@@ -275,6 +285,7 @@ class Cia402Drive:
                     count = self._syncs[pdo.cob_id] = self._syncs.get(pdo.cob_id, 0) + 1
                     if kind == 0 or count % kind == 0:
                         due.append(pdo)
+        self._await_partners(number)
         for pdo in due:
             pdo.data = bytearray((pdo.length + 7) // 8)
             for variable in pdo:
@@ -283,6 +294,26 @@ class Cia402Drive:
             with contextlib.suppress(can.CanError):
                 pdo.transmit()
                 self.tpdos_sent += 1
+        self._answered(number)
+
+    def _await_partners(self, number: int) -> None:
+        # On a real bus every drive answers a SYNC within microseconds, long before the next.
+        # Each emulated drive answers in its own thread, which a busy machine can hold back a
+        # SYNC period or more: without this wait one drive's answer to SYNC n+1 could reach the
+        # master before the other's to SYNC n, a pair of positions no real bus gives.
+        with self.step:
+            self.step.wait_for(
+                lambda: all(
+                    other.answered >= number - 1 or not other.operational
+                    for other in self.in_step_with
+                ),
+                timeout=1.0,
+            )
+
+    def _answered(self, number: int) -> None:
+        with self.step:
+            self.answered = number
+            self.step.notify_all()
 
     def _on_rpdo(self, pdo_map) -> None:
         if not self.operational:
@@ -378,6 +409,8 @@ class Cia402BaseEmulator:
         self.signs = {"left": 1, "right": -1 if invert_right else 1}
         self.left = Cia402Drive(left, self.channel, on_motion=self._advance, interface=interface)
         self.right = Cia402Drive(right, self.channel, on_motion=self._advance, interface=interface)
+        self.left.in_step_with, self.right.in_step_with = [self.right], [self.left]
+        self.left.step = self.right.step = threading.Condition()
         query = {
             "profile": "cia402",
             "left": left,
