@@ -1,4 +1,5 @@
 import os
+import threading
 
 import pytest
 
@@ -17,6 +18,24 @@ def _test_settings(settings, tmp_path):
     settings.PASSWORD_HASHERS = ["django.contrib.auth.hashers.MD5PasswordHasher"]
     # Any free port: tests run side by side, and never listen beyond loopback.
     settings.GATEWAY_DEFAULTS = {"gcs": "127.0.0.1:0", "programs": "127.0.0.1:0"}
+
+
+@pytest.fixture
+def held_claim(monkeypatch):
+    """An in-process agent's Run.claim waits until the test sets this event, then asks the
+    database as it would have: its program is up before the answer."""
+    from programs.models import Run
+
+    let_go = threading.Event()
+    claim = Run.claim
+
+    def held(run_id):
+        let_go.wait(30)
+        return claim(run_id)
+
+    monkeypatch.setattr(Run, "claim", held)
+    yield let_go
+    let_go.set()
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,8 @@ Each run has its own endpoint, at ROBOT_MAVLINK's port inside its own network na
 a run on another robot cannot reach it; a second run of the same user (it does not wait
 in line) cannot arm the vehicle or send it a setpoint while the first holds the robot; the
 holder can; an emergency stop ends them both. A ground station set to ``control: lease`` is
-refused commands while a program holds the robot; one set to ``always`` is not.
+refused commands while a program holds the robot; one set to ``always`` is not. A run whose
+claim is not answered yet (its program starts meanwhile) may listen, not command.
 """
 
 import asyncio
@@ -50,6 +51,28 @@ link = mavutil.mavlink_connection("udpout:127.0.0.1:14551", source_system=202)
 for _ in range(5):
     link.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
 print("sent", flush=True)
+"""
+ARMS_UNTIL_ACCEPTED = """
+import os, time
+from pymavlink import mavutil
+link = mavutil.mavlink_connection(os.environ["ROBOT_MAVLINK"], source_system=203)
+link.mav.heartbeat_send(6, 8, 0, 0, 0)
+beat = link.wait_heartbeat(timeout=10)
+while beat.get_srcSystem() != 1:
+    beat = link.wait_heartbeat(timeout=10)
+print("heard the vehicle", flush=True)
+while True:
+    link.mav.set_position_target_local_ned_send(0, 1, 1, 8, 0b110111000111, 0, 0, 0, 1.0, 0, 0,
+                                                0, 0, 0, 0, 0)
+    link.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)  # arm
+    ack = link.recv_match(type="COMMAND_ACK", condition="COMMAND_ACK.command == 400",
+                          blocking=True, timeout=10)
+    result = None if ack is None else ack.result
+    print("arm ack", result, flush=True)
+    if result == 0:
+        break
+    time.sleep(0.1)
+time.sleep(120)
 """
 
 
@@ -150,3 +173,17 @@ async def test_a_ground_station_commands_as_its_control_setting_says(rover, cont
         assert stats["endpoints"][row.pk]["commanding"] < 10
     await ask_agent("mavlink", "robot.estop", by=user.username)
     await in_state(await fresh(holder), "stopped")
+
+
+async def test_a_run_commands_the_vehicle_only_once_its_claim_is_answered(rover, held_claim):
+    emulator, agent, robot, user = rover
+    run = await run_program(user, robot, ARMS_UNTIL_ACCEPTED)
+    out = await said(run, f"arm ack {DENIED}")  # up, and listening, before the answer
+    assert "heard the vehicle" in out, out
+    assert from_system(emulator, 203) == ([], []), out  # nothing of it reached the vehicle
+    assert agent.lease.holder is None
+    held_claim.set()
+    out = await said(run, "arm ack 0")
+    commands, setpoints = from_system(emulator, 203)
+    assert commands and setpoints, out
+    assert agent.lease.holds(run.pk)

@@ -2,10 +2,10 @@
 robot is not its until the claim is answered yes, and a no ends it.
 
 A real agent on the sim robot, in this process; the claim is held back (the real one, run
-once a test lets it go) so that the program is surely up before the answer."""
+once a test lets it go: the held_claim fixture) so that the program is surely up before the
+answer."""
 
 import asyncio
-import threading
 import time
 
 import pytest
@@ -28,21 +28,6 @@ bot.drive(0.2, 0.0)
 print("drove", flush=True)
 time.sleep(30)
 """
-
-
-@pytest.fixture
-def held_claim(monkeypatch):
-    """Run.claim waits until `let_go` is set, then asks the database as it would have."""
-    let_go = threading.Event()
-    claim = Run.claim
-
-    def held(run_id):
-        let_go.wait(30)
-        return claim(run_id)
-
-    monkeypatch.setattr(Run, "claim", held)
-    yield let_go
-    let_go.set()
 
 
 async def start(run: Run) -> None:
