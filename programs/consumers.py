@@ -14,6 +14,7 @@ from django.utils.translation import ngettext
 from programs.access import get_program_for_user, get_run_for_user
 from programs.runlog import count_lines_between, lines_after, places_in, render_lines, tail
 from programs.views import run_tables_context
+from robotide.consumers import DirectDispatch
 from robotide.ws_user import user_of
 from robots.bus import RUNS_GROUP, console_group, run_group
 
@@ -30,7 +31,7 @@ def skipped_line(count: int) -> str:
     return f'<div class="ln s">{escape(text)}</div>'
 
 
-class RunConsumer(AsyncWebsocketConsumer):
+class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
     """A run's output from its first line, then live; and its state as it changes."""
 
     group: str | None = None
@@ -189,7 +190,7 @@ class ConsoleConsumer(RunConsumer):
         return render_to_string("programs/_console.html", context)
 
 
-class RunListConsumer(AsyncWebsocketConsumer):
+class RunListConsumer(DirectDispatch, AsyncWebsocketConsumer):
     """The running and recent runs tables, re-rendered for this user when a run changes."""
 
     async def connect(self):

@@ -36,6 +36,7 @@ from django.http import Http404
 
 import rhal
 from rhal.camera import CameraError, CameraSettings, FfmpegCamera, fit_jpeg
+from robotide.consumers import DirectDispatch
 from robots.bus import AgentUnavailable, ask_agent, send_to_agent
 from robots.models import Robot, get_robot_for_user
 
@@ -271,7 +272,7 @@ def _robot_for(user, name: str) -> Robot | None:
         return None
 
 
-class CameraStream(AsyncHttpConsumer):
+class CameraStream(DirectDispatch, AsyncHttpConsumer):
     """``GET /robots/<name>/camera.mjpg`` for signed-in users who may see the robot."""
 
     group: str | None = None

@@ -12,6 +12,7 @@ from django.utils.translation import gettext as _
 
 from programs.access import runs_for_user
 from programs.models import Run
+from robotide.consumers import DirectDispatch
 from robots.bus import send_to_agent
 from robots.models import get_robot_for_user, robot_group
 from robots.readings import sensor_rows, show_items, status
@@ -48,7 +49,7 @@ def _get_robot(user, name):
         return None
 
 
-class RobotConsumer(AsyncWebsocketConsumer):
+class RobotConsumer(DirectDispatch, AsyncWebsocketConsumer):
     async def connect(self):
         self.robot = await _get_robot(self.scope["user"], self.scope["url_route"]["kwargs"]["name"])
         if self.robot is None:
