@@ -88,6 +88,7 @@ def serve(mode: str, sample: str) -> None:
     django.setup()  # robots.robot_api reaches robots.models
 
     import rhal
+    from robots.agent import ActiveRun
     from robots.robot_api import RobotApi
     from robots.rpc import RobotApiServer, RpcError
 
@@ -128,7 +129,7 @@ def serve(mode: str, sample: str) -> None:
         else:
             driver = rhal.connect("sim://")
             await driver.open()
-            active = SimpleNamespace(run_id=0, token=TOKEN, drove=False)
+            active = ActiveRun(run_id=0, token=TOKEN, process=None)  # claimed: no claim asked
             agent = SimpleNamespace(name="bench", tokens={TOKEN: active}, shows={}, driver=driver)
             handler = RobotApi(agent).handle
         # The same transport as the appliance gives programs: a Unix socket.
