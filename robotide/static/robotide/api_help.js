@@ -269,6 +269,8 @@
     if (!state.help || cm.state.completionActive || state.keyboardTip) return;
     var x = event.clientX, y = event.clientY;
     state.hoverTimer = setTimeout(function () {
+      // Ctrl-Space or F1 may have come since the mouse moved: their tip stays.
+      if (cm.state.completionActive || state.keyboardTip) return;
       var pos = cm.coordsChar({ left: x, top: y }, "window");
       var box = cm.charCoords(pos, "window");
       var over = y >= box.top && y <= box.bottom && Math.abs(x - box.left) < 12;
