@@ -62,6 +62,10 @@ def get_program_for_user(user, pk, level: str = READ) -> Program:
     """The program: 404 if ``user`` may not see it, 403 if they see it but may not do
     ``level`` to it (a read-only share, a teacher's view of a student's program)."""
     try:
+        # Its owner may do anything to it: one plain query first, the common case (the
+        # query of everything a user may see costs a run's start 4 ms on a slow machine).
+        if (program := _owned(Program.objects.select_related("owner"), user, pk)) is not None:
+            return program
         program = programs_for_user(user).get(pk=pk)
     except (Program.DoesNotExist, ValueError, TypeError):
         raise Http404(_("No such program.")) from None
@@ -78,6 +82,17 @@ def can(user, level: str, program: Program) -> bool:
 
 def get_run_for_user(user, pk) -> Run:
     try:
+        # Who started it sees it: one plain query first, as for a program.
+        if (run := _owned(Run.objects.select_related("robot", "owner"), user, pk)) is not None:
+            return run
         return runs_for_user(user).get(pk=pk)
     except (Run.DoesNotExist, ValueError, TypeError):
         raise Http404(_("No such run.")) from None
+
+
+def _owned(objects: QuerySet, user, pk):
+    """The object numbered ``pk`` if ``user`` owns it, else None (and for admins, whose
+    query of everything is as plain)."""
+    if not user.is_authenticated or user.is_superuser:
+        return None
+    return objects.filter(pk=pk, owner=user).first()
