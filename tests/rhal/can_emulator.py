@@ -57,6 +57,7 @@ VOLTAGE_ENABLED, REMOTE, TARGET_REACHED = 0x0010, 0x0200, 0x0400
 HALT, FAULT_RESET = 0x0100, 0x0080
 SUPPORTED_MODES = (1, 3)  # as 0x6502 in the EDS says: profile position and profile velocity
 ABORT_VALUE_RANGE = 0x06090030
+STEP_WAIT = 0.1  # s a drive waits for the others to answer the SYNC before, at most
 
 
 def _channel(interface: str, channel: str | None) -> str:
@@ -300,14 +301,16 @@ class Cia402Drive:
         # On a real bus every drive answers a SYNC within microseconds, long before the next.
         # Each emulated drive answers in its own thread, which a busy machine can hold back a
         # SYNC period or more: without this wait one drive's answer to SYNC n+1 could reach the
-        # master before the other's to SYNC n, a pair of positions no real bus gives.
+        # master before the other's to SYNC n, a pair of positions no real bus gives. Bounded:
+        # a drive that stopped answering (reset, unplugged) must not hold this one's SDO
+        # answers and RPDOs back, which wait in the same thread.
         with self.step:
             self.step.wait_for(
                 lambda: all(
                     other.answered >= number - 1 or not other.operational
                     for other in self.in_step_with
                 ),
-                timeout=1.0,
+                timeout=STEP_WAIT,
             )
 
     def _answered(self, number: int) -> None:
