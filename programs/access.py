@@ -63,7 +63,7 @@ def get_program_for_user(user, pk, level: str = READ) -> Program:
     ``level`` to it (a read-only share, a teacher's view of a student's program)."""
     try:
         # Its owner may do anything to it: one plain query first, the common case (the
-        # query of everything a user may see costs a run's start 4 ms on a slow machine).
+        # query of everything a student may see takes twice as long, and more under load).
         if (program := _owned(Program.objects.select_related("owner"), user, pk)) is not None:
             return program
         program = programs_for_user(user).get(pk=pk)

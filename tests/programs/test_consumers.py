@@ -1,5 +1,8 @@
 """The websocket consumers: access checks, the log tail, the live lines, the state."""
 
+import asyncio
+import threading
+
 import pytest
 from channels.db import database_sync_to_async
 from channels.layers import get_channel_layer
@@ -65,6 +68,34 @@ async def test_the_run_stream_starts_with_the_log_and_skips_what_it_already_sent
         '<div id="log-lines" hx-swap-oob="beforeend">'
         '<div class="ln o">partial line without end</div></div>'
     )
+    await comm.disconnect()
+
+
+async def test_a_line_reaches_the_viewer_while_the_database_thread_is_busy():
+    # A start's first line comes while its claim and its state are written, in the one
+    # thread that does database work: handling the line must not wait for that thread.
+    alice, _, run = await make_run(b"")
+    comm = communicator(RunConsumer, f"/ws/runs/{run.pk}/", alice, run_id=run.pk)
+    assert (await comm.connect())[0]
+    await comm.receive_from()  # the (empty) tail
+    await comm.receive_from()  # the state
+    busy, release = threading.Event(), threading.Event()
+
+    def database_work():
+        busy.set()
+        release.wait(30)
+
+    work = asyncio.ensure_future(database_sync_to_async(database_work)())
+    try:
+        await asyncio.to_thread(busy.wait, 10)
+        lines = [[0, "o", "first"]]
+        await get_channel_layer().group_send(
+            run_group(run.pk), {"type": "run.output", "run_id": run.pk, "lines": lines}
+        )
+        assert "first" in await comm.receive_from(timeout=10)
+    finally:
+        release.set()
+        await work
     await comm.disconnect()
 
 
