@@ -30,10 +30,19 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def wait_for(predicate, timeout=20.0, interval=0.05, what="condition"):
+# s an appliance may take to come up: under two test processes' load a split one (a fresh
+# PostgreSQL database migrated, collectstatic) took over 20 s. Only a failing start waits it.
+START_TIMEOUT = 120.0
+
+
+def wait_for(predicate, timeout=20.0, interval=0.05, what="condition", gone=None):
+    """Wait for ``predicate``; ``gone``: says when waiting longer is pointless (a process
+    that ended)."""
     deadline = time.monotonic() + timeout
     last = None
     while time.monotonic() < deadline:
+        if gone is not None and gone():
+            raise RuntimeError(f"gave up waiting for {what}: it ended (last: {last!r})")
         try:
             last = predicate()
             if last:
@@ -82,13 +91,16 @@ class Appliance:
             self.env["REDIS_URL"] = f"{REDIS}/{self.redis_db[0]}"
         self.server = self._spawn("up", "--bind", f"127.0.0.1:{self.port}")
         wait_for(lambda: httpx.get(f"{self.url}/accounts/login/").status_code == 200,
-                 what="the web server")  # fmt: skip
+                 timeout=START_TIMEOUT, what="the web server", gone=self._ended)  # fmt: skip
         if self.mode == "split":
             self.agent = self._spawn("agent", "sim")
         self.token = self.cli("token", "admin").strip()
         wait_for(lambda: self.api("GET", "/api/robots/sim/sensors").status_code == 200,
-                 what="the sim robot's agent")  # fmt: skip
+                 timeout=START_TIMEOUT, what="the sim robot's agent", gone=self._ended)  # fmt: skip
         return self
+
+    def _ended(self) -> bool:
+        return any(proc.poll() is not None for proc in self.processes)
 
     def _spawn(self, *args) -> subprocess.Popen:
         log = open(self.data_dir / f"{args[0]}-{len(self.processes)}.log", "w")  # noqa: SIM115
