@@ -66,7 +66,6 @@ def test_a_shared_robot_queues_runs_and_shows_each_its_place(
     expect(queue.locator(f'li[data-run="{carol}"]')).to_contain_text("queued — 2nd in line")
     expect(queue).to_contain_text("bob")
     expect(page.locator("#control")).to_contain_text(f"alice's program (run #{alice})")
-    page.locator("#robot-queue").scroll_into_view_if_needed()
     screenshot(page, "run-queue")
 
     page.get_by_role("button", name=f"Move to the front: run #{carol}").click()
