@@ -24,7 +24,8 @@ from tests.e2e.test_run_queue import fresh, in_state
 pytestmark = pytest.mark.django_db(transaction=True)
 DENIED = mavutil.mavlink.MAV_RESULT_DENIED
 
-ARMS = """
+# A program on the MAVLink robot: it makes itself heard, then hears the vehicle.
+HEARS = """
 import os, time
 from pymavlink import mavutil
 link = mavutil.mavlink_connection(os.environ["ROBOT_MAVLINK"], source_system={system})
@@ -33,7 +34,10 @@ beat = link.wait_heartbeat(timeout=10)
 while beat.get_srcSystem() != 1:
     beat = link.wait_heartbeat(timeout=10)
 print("heard the vehicle", flush=True)
-{before}
+"""
+ARMS = (
+    HEARS
+    + """
 link.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)  # arm
 ack = link.recv_match(type="COMMAND_ACK", condition="COMMAND_ACK.command == 400",
                       blocking=True, timeout=10)
@@ -43,6 +47,7 @@ link.mav.set_position_target_local_ned_send(0, 1, 1, 8, 0b110111000111, 0, 0, 0,
 print("setpoint sent", flush=True)
 time.sleep(120)
 """
+)
 REACHES_FOR_IT = """
 import os, socket
 from pymavlink import mavutil
@@ -52,15 +57,9 @@ for _ in range(5):
     link.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
 print("sent", flush=True)
 """
-ARMS_UNTIL_ACCEPTED = """
-import os, time
-from pymavlink import mavutil
-link = mavutil.mavlink_connection(os.environ["ROBOT_MAVLINK"], source_system=203)
-link.mav.heartbeat_send(6, 8, 0, 0, 0)
-beat = link.wait_heartbeat(timeout=10)
-while beat.get_srcSystem() != 1:
-    beat = link.wait_heartbeat(timeout=10)
-print("heard the vehicle", flush=True)
+ARMS_UNTIL_ACCEPTED = (
+    HEARS
+    + """
 while True:
     link.mav.set_position_target_local_ned_send(0, 1, 1, 8, 0b110111000111, 0, 0, 0, 1.0, 0, 0,
                                                 0, 0, 0, 0, 0)
@@ -74,10 +73,11 @@ while True:
     time.sleep(0.1)
 time.sleep(120)
 """
+)
 
 
-def program(system: int, before: str = "") -> str:
-    return ARMS.format(system=system, before=before)
+def program(system: int) -> str:
+    return ARMS.format(system=system)
 
 
 def from_system(emulator, system: int) -> tuple[list, list]:
@@ -177,7 +177,7 @@ async def test_a_ground_station_commands_as_its_control_setting_says(rover, cont
 
 async def test_a_run_commands_the_vehicle_only_once_its_claim_is_answered(rover, held_claim):
     emulator, agent, robot, user = rover
-    run = await run_program(user, robot, ARMS_UNTIL_ACCEPTED)
+    run = await run_program(user, robot, ARMS_UNTIL_ACCEPTED.format(system=203))
     out = await said(run, f"arm ack {DENIED}")  # up, and listening, before the answer
     assert "heard the vehicle" in out, out
     assert from_system(emulator, 203) == ([], []), out  # nothing of it reached the vehicle
