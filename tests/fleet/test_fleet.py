@@ -93,13 +93,17 @@ def test_static_files_are_compressed_and_kept_for_good(fleet):
     assert "immutable" in response.headers["cache-control"]
 
 
-def workers_seen(app, times=40) -> set[str]:
-    return {httpx.get(f"{app.url}/healthz").headers[WORKER] for _ in range(times)}
+def workers_seen(app, times=20) -> set[str]:
+    """The workers that answered ``times`` requests, each on a new connection."""
+    with httpx.Client(limits=httpx.Limits(max_keepalive_connections=0)) as client:
+        return {client.get(f"{app.url}/healthz").headers[WORKER] for _ in range(times)}
 
 
 def test_two_workers_and_five_agents_serve_the_portal(fleet):
     app, runner = fleet
-    assert len(workers_seen(app)) == 2  # either worker serves any request
+    # Either worker serves any request; which one accepts is the kernel's choice, and on a
+    # loaded machine the same one may win twenty times in a row.
+    wait(lambda: len(workers_seen(app)) == 2, timeout=60, what="both workers answering")
     robots = {r["name"]: r for r in app.api("GET", "/api/robots").json()}
     assert all(robots[name]["online"] and robots[name]["last_seen"] for name in ROBOTS)
     pids = {runner.services[f"agent-{name}"].process.pid for name in ROBOTS}
