@@ -1,5 +1,8 @@
+import functools
 import os
+import re
 import threading
+from pathlib import Path
 
 import pytest
 
@@ -54,15 +57,26 @@ def any_appliance(request, tmp_path_factory):
     app.stop()
 
 
-# Modules whose tests share something of the machine's (one OS account and its clone, a fleet's
-# servers made once for the module) run in one test process when the suite runs in several
-# (`make test`: pytest-xdist); every other test goes wherever a process is free. pytest-xdist's
-# own xdist_group marks do nothing with pytest 9.2 (its node ids changed), hence this.
+# How the suite splits over several test processes (`make test`: pytest-xdist). A module whose
+# tests share an appliance (a module-scoped server, 4-25 s to start) goes whole to one process:
+# split, each process would start its own. So do the modules that share something of the
+# machine's (one OS account and its clone, a fleet's servers made once for the module). Every
+# other test goes wherever a process is free. pytest-xdist's own xdist_group marks do nothing
+# with pytest 9.2 (its node ids changed), hence this.
 TOGETHER = {
     "tests/e2e/test_ordinary_user.py",
     "tests/fleet/test_fleet.py",
     "tests/fleet/test_passwords.py",
 }
+SHARES_A_SERVER = re.compile(r"\b(any_)?appliance\b|\bAppliance\(")
+
+
+@functools.cache
+def kept_together(module: str) -> bool:
+    if module in TOGETHER:
+        return True
+    path = Path(__file__).parent.parent / module
+    return path.is_file() and bool(SHARES_A_SERVER.search(path.read_text()))
 
 
 @pytest.hookimpl(optionalhook=True)
@@ -72,7 +86,7 @@ def pytest_xdist_make_scheduler(config, log):
     class SomeModulesTogether(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
             module = nodeid.split("::", 1)[0]
-            return module if module in TOGETHER else nodeid
+            return module if kept_together(module) else nodeid
 
     return SomeModulesTogether(config, log)
 
