@@ -117,6 +117,7 @@ def serve(mode: str, sample: str) -> None:
             return
         if mode == "rpc":
             fixed = json.loads(sample)
+            quick = lambda method: True  # noqa: E731 - its handler never waits
 
             async def handler(session, method, params):
                 if method == "auth":
@@ -131,9 +132,11 @@ def serve(mode: str, sample: str) -> None:
             await driver.open()
             active = ActiveRun(run_id=0, token=TOKEN, process=None)  # claimed: no claim asked
             agent = SimpleNamespace(name="bench", tokens={TOKEN: active}, shows={}, driver=driver)
-            handler = RobotApi(agent).handle
+            api = RobotApi(agent)
+            handler, quick = api.handle, api.quick
         # The same transport as the appliance gives programs: a Unix socket.
-        server = RobotApiServer(handler, unix_path=Path(tempfile.mkdtemp(prefix="bench-")) / "s")
+        folder = Path(tempfile.mkdtemp(prefix="bench-"))
+        server = RobotApiServer(handler, unix_path=folder / "s", quick=quick)
         await server.start()
         print(server.url, flush=True)
         await asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)  # until EOF
