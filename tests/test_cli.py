@@ -2,12 +2,13 @@
 
 import os
 import re
+import shutil
 import signal
 import subprocess
 
 import httpx
 
-from tests.appliance import ROBOTIDE, free_port, wait_for
+from tests.appliance import ROBOTIDE, SQLITE, free_port, migrated_sqlite, wait_for
 
 
 def start(data_dir, port, **env):
@@ -66,7 +67,7 @@ def test_token_for_an_unknown_user_fails_clearly(tmp_path):
     env = {**os.environ, "ROBOTIDE_DATA": str(tmp_path)}
     env.pop("REDIS_URL", None)
     env.pop("DATABASE_URL", None)
-    subprocess.run([ROBOTIDE, "manage", "migrate", "-v0"], env=env, check=True)
+    shutil.copy(migrated_sqlite(), tmp_path / SQLITE)
     result = subprocess.run([ROBOTIDE, "token", "nobody"], env=env, capture_output=True, text=True)
     assert result.returncode == 2 and "no user named 'nobody'" in result.stderr
 
