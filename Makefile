@@ -3,8 +3,7 @@
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
-# The suite runs in two test processes (pytest-xdist): 16-20 min on two cores instead of 24-26
-# in one. `make test PYTEST_PARALLEL=` runs it in one process.
+# The suite runs in two test processes (pytest-xdist): about 16 min on two cores. `make test PYTEST_PARALLEL=` runs it in one process.
 PYTEST_PARALLEL ?= -n 2
 
 .PHONY: run test lint bench bench-deps fleet fleet-secrets clean

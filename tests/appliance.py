@@ -6,11 +6,13 @@ Split: `robotide up` with REDIS_URL and DATABASE_URL (a fresh PostgreSQL databas
 """
 
 import atexit
+import contextlib
 import os
 import re
 import shutil
 import signal
 import socket
+import sqlite3
 import subprocess
 import sys
 import tempfile
@@ -221,6 +223,10 @@ def migrated_sqlite() -> str:
         folder = Path(tempfile.mkdtemp(prefix="robotide-migrated-"))
         atexit.register(shutil.rmtree, folder, ignore_errors=True)
         _migrate({"ROBOTIDE_DATA": str(folder)})
+        # All of it in the one file a copy takes: what the write-ahead log may still hold goes
+        # in, and the last connection closed removes the log.
+        with contextlib.closing(sqlite3.connect(folder / SQLITE)) as db:
+            db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
         _migrated["sqlite"] = str(folder / SQLITE)
     return _migrated["sqlite"]
 
