@@ -95,7 +95,8 @@ def build_root(spec: dict) -> None:
     for path, target in links.items():
         os.symlink(target, ROOT + path)
     bind(clients, ROOT + spec["clients_at"], readonly=True)
-    bind(api, ROOT + spec["api_at"], readonly=False)
+    # Read-only: the robot's, shared by its runs (connect() needs no write to the mount).
+    bind(api, ROOT + spec["api_at"], readonly=True)
     for device in devices:
         bind(device, ROOT + device.path, readonly=False)
     for name, target in (("fd", "/proc/self/fd"), ("stdin", "/proc/self/fd/0"),
@@ -192,6 +193,8 @@ def serve_as_init(child: int) -> int:
 
 
 def main() -> int:
+    # Inherited from the agent: the program must not inherit it in turn (the agent's end).
+    os.set_inheritable(int(sys.argv[1]), False)
     control = socket.socket(fileno=int(sys.argv[1]))
     control.setblocking(True)  # whatever the file's flags came as
     reader = control.makefile("rb")
@@ -212,6 +215,7 @@ def main() -> int:
     except (ValueError, KeyError, TypeError, AttributeError):
         print(f"robotide: the agent did not let the run start ({answer[:80]!r})", file=sys.stderr)
         return 125
+    reader.close()  # the socket closes with the last of the two
     control.close()
     write_program(spec["home"], run)
     become_the_run()

@@ -198,7 +198,8 @@ class InForce:
             *(arg for d in ("/home", "/run", "/opt", "/opt/robotide")
               for arg in ("--perms", "0755", "--dir", d)),
             "--ro-bind", str(self.clients_dir), str(self.CLIENTS),
-            "--bind", str(socket_dir), str(self.API_DIR),
+            # Read-only: the robot's, shared by its runs (connect() needs no write to it).
+            "--ro-bind", str(socket_dir), str(self.API_DIR),
         ]  # fmt: skip
         for top in TOPS:
             path = Path("/") / top

@@ -51,6 +51,7 @@ async def run(spec: dict) -> dict:
     clients.mkdir()
     sockets = folder / "sockets"
     sockets.mkdir()
+    api = listen_as_the_agent(sockets / "api.sock")
     in_force = policy.resolve(clients)
     limits = launcher.Limits.from_settings(spec.get("limits", {}))
     listeners = [] if policy.network == "none" else [Listener("tcp:7010", Echo().serve)]
@@ -92,7 +93,37 @@ async def run(spec: dict) -> dict:
         "state": outcome.state, "exit_code": outcome.exit_code, "reason": outcome.reason,
         "log": log, "seconds": time.monotonic() - started, "left": left,
         "rootless": in_force.rootless, "started": process.started,
+        "api_folder": api_folder_after(sockets, api),
     }  # fmt: skip
+
+
+def listen_as_the_agent(path: Path) -> socket.socket:
+    """The Robot API's Unix socket, its folder and modes as robots/agent.py makes them."""
+    api = socket.socket(socket.AF_UNIX)
+    api.bind(str(path))
+    api.listen(5)
+    path.parent.chmod(0o711)
+    path.chmod(0o666)
+    return api
+
+
+def api_folder_after(sockets: Path, api: socket.socket) -> dict:
+    """The socket's folder as the host sees it after the run: its files, mode, and whether
+    the socket still reaches the agent's listener."""
+    client = socket.socket(socket.AF_UNIX)
+    try:
+        client.connect(str(sockets / "api.sock"))
+        api.accept()[0].close()
+        reaches = True
+    except OSError:
+        reaches = False
+    finally:
+        client.close()
+    return {
+        "files": sorted(p.name for p in sockets.iterdir()),
+        "mode": oct(sockets.stat().st_mode & 0o7777),
+        "reaches": reaches,
+    }
 
 
 if __name__ == "__main__":

@@ -170,3 +170,45 @@ def test_a_box_whose_run_never_comes_ends_with_nothing_left(mode, readable_copy)
     program, it leaves no process behind."""
     result = box_run(mode, readable_copy, "print('RAN')", ahead=0.3, refuse="settings changed")
     assert result["started"] is False and "RAN" not in result["log"] and result["left"] == []
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_the_run_cannot_change_the_robot_api_sockets_folder(mode, readable_copy):
+    """The folder is the robot's, shared by all its runs: a run that could write there would
+    fill the host's disk outside its own, or put its listener where the next run's program
+    connects and take that run's token."""
+    source = """
+import os, socket
+attempts = [
+    ("write", lambda: open("/run/robot/junk", "wb").write(b"x" * 4096)),
+    ("unlink", lambda: os.unlink("/run/robot/api.sock")),
+    ("bind", lambda: socket.socket(socket.AF_UNIX).bind("/run/robot/mine.sock")),
+    ("chmod", lambda: os.chmod("/run/robot", 0o777)),
+]
+for name, attempt in attempts:
+    try:
+        attempt()
+        print("DID", name)
+    except OSError as e:
+        print("refused", name, e.strerror)
+s = socket.socket(socket.AF_UNIX); s.connect("/run/robot/api.sock"); print("connected")
+"""
+    result = box_run(mode, readable_copy, source)
+    log = result["log"]
+    assert result["state"] == "finished", log
+    assert "DID" not in log and log.count("refused") == 4, log
+    assert "connected" in log
+    assert result["api_folder"] == {"files": ["api.sock"], "mode": "0o711", "reaches": True}
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_the_program_inherits_no_descriptor_of_the_box(mode, readable_copy):
+    """Nothing of the box's making (its control socket to the agent, the seccomp filter's
+    file) reaches the program: only its standard input, output and error."""
+    source = """
+import os
+print("fds", sorted(int(fd) for fd in os.listdir("/proc/self/fd")))
+"""
+    result = box_run(mode, readable_copy, source)
+    assert result["state"] == "finished", result["log"]
+    assert "fds [0, 1, 2, 3]" in result["log"], result["log"]  # 3: the listing's own
