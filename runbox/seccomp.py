@@ -18,7 +18,11 @@ What it denies, with EPERM so a program gets a clear error rather than a crash:
   ``modify_ldt``, swap, ``reboot``, ``acct``, quotas, file handles, ``syslog``, ``vhangup``,
   setting the clock, NUMA memory policy, and Docker's other default denials;
 - ``personality`` other than Linux / Linux32 (optionally with UNAME26) and the query;
-- ``ioctl(TIOCSTI)`` and ``ioctl(TIOCLINUX)``, which push input into a terminal (as Flatpak).
+- ``ioctl(TIOCSTI)`` and ``ioctl(TIOCLINUX)``, which push input into a terminal (as Flatpak);
+- sockets of any family but Unix, IPv4, IPv6 and netlink, with EAFNOSUPPORT (as Flatpak):
+  vsock is not network-namespaced (on a virtual machine a run would share the host's vsock
+  ports whatever its network), and the rarer families are kernel code a program has no use
+  for.
 
 Everything else is allowed. Only the machine's own architecture passes: a system call made
 through another ABI (i386 ``int 0x80`` or x32 on x86_64, AArch32 on aarch64) kills the
@@ -57,6 +61,8 @@ UNSHARE_NAMESPACES = (CLONE_NEWTIME, *CLONE_NAMESPACES)
 
 TIOCSTI = 0x5412
 TIOCLINUX = 0x541C
+# socket(2)'s families a run may use: AF_UNIX, AF_INET, AF_INET6, AF_NETLINK.
+SOCKET_FAMILIES = (1, 2, 10, 16)
 
 # personality(2) values allowed, as in Docker's profile: PER_LINUX, PER_LINUX32, each with
 # UNAME26, and 0xffffffff, which only asks for the current one.
@@ -142,7 +148,25 @@ def rules() -> list[Rule]:
     # ioctl's request is an int: its upper half may be anything.
     out += [Rule("ioctl", arg=1, a=0xFFFFFFFF, b=op) for op in (TIOCSTI, TIOCLINUX)]
     out += personality_rules()
+    out += socket_rules()
     return out
+
+
+def socket_rules() -> list[Rule]:
+    """socket() and socketpair() of a family not in SOCKET_FAMILIES: EAFNOSUPPORT. The
+    others below the highest allowed one by name, everything above it (a top half included)
+    by one comparison."""
+    refused = errno_action(errno.EAFNOSUPPORT)
+    top = max(SOCKET_FAMILIES)
+    others = [f for f in range(top) if f not in SOCKET_FAMILIES]
+    return [
+        rule
+        for call in ("socket", "socketpair")
+        for rule in (
+            *(Rule(call, refused, arg=0, op=CMP_EQ, a=family) for family in others),
+            Rule(call, refused, arg=0, op=CMP_GT, a=top),
+        )
+    ]
 
 
 def personality_rules() -> list[Rule]:

@@ -23,6 +23,7 @@ from runbox import seccomp
 ALLOW = seccomp.ACT_ALLOW
 KILL = seccomp.ACT_KILL_PROCESS
 EPERM = seccomp.errno_action(errno.EPERM)
+EAFNOSUPPORT = seccomp.errno_action(errno.EAFNOSUPPORT)
 ENOSYS = seccomp.errno_action(errno.ENOSYS)
 
 # The kernel's numbers (arch/x86/entry/syscalls/syscall_64.tbl, include/uapi/asm-generic/
@@ -35,6 +36,7 @@ NR = {
         "io_uring_setup": 425, "clone3": 435, "openat": 257, "iopl": 172, "execve": 59,
         "pivot_root": 155, "fsopen": 430, "kexec_load": 246, "process_vm_readv": 310,
         "get_mempolicy": 239, "seccomp": 317, "landlock_create_ruleset": 444,
+        "socket": 41, "socketpair": 53,
     },
     "aarch64": {
         "read": 63, "write": 64, "ioctl": 29, "getpid": 172, "clone": 220,
@@ -43,6 +45,7 @@ NR = {
         "io_uring_setup": 425, "clone3": 435, "openat": 56, "execve": 221,
         "pivot_root": 41, "fsopen": 430, "kexec_load": 104, "process_vm_readv": 270,
         "get_mempolicy": 236, "seccomp": 277, "landlock_create_ruleset": 444,
+        "socket": 198, "socketpair": 199,
     },
     "arm": {  # arch/arm/tools/syscall.tbl (EABI)
         "read": 3, "write": 4, "ioctl": 54, "getpid": 20, "clone": 120,
@@ -51,6 +54,7 @@ NR = {
         "io_uring_setup": 425, "clone3": 435, "openat": 322, "execve": 11,
         "pivot_root": 218, "fsopen": 430, "kexec_load": 347, "process_vm_readv": 376,
         "get_mempolicy": 320, "seccomp": 383, "landlock_create_ruleset": 444,
+        "socket": 281, "socketpair": 288,
     },
 }  # fmt: skip
 AUDIT_ARCH = {"x86_64": 0xC000003E, "aarch64": 0xC00000B7, "arm": 0x40000028}
@@ -121,6 +125,13 @@ DECISIONS = [
         ("ioctl", (1, 0x5401), ALLOW),  # TCGETS
         ("ioctl", (1, 0x5412), EPERM), ("ioctl", (1, 0xDEAD0000_00005412), EPERM),  # TIOCSTI
         ("ioctl", (1, 0x541C), EPERM),  # TIOCLINUX
+        # Unix, IPv4, IPv6, netlink; not vsock, packet, AF_ALG, AF_UNSPEC, nor a top half
+        ("socket", (1,), ALLOW), ("socket", (2,), ALLOW), ("socket", (10,), ALLOW),
+        ("socket", (16,), ALLOW), ("socket", (40,), EAFNOSUPPORT),
+        ("socket", (17,), EAFNOSUPPORT), ("socket", (38,), EAFNOSUPPORT),
+        ("socket", (0,), EAFNOSUPPORT), ("socket", (3,), EAFNOSUPPORT),
+        ("socket", (0xFFFFFFFF_00000001,), EAFNOSUPPORT),
+        ("socketpair", (1,), ALLOW), ("socketpair", (40,), EAFNOSUPPORT),
 ]  # fmt: skip
 
 
@@ -273,6 +284,14 @@ PROBE = textwrap.dedent(
     def clone3():
         args = ctypes.create_string_buffer(struct.pack("QQQQQQQQ", 0, 0, 0, 0, 17, 0, 0, 0))
         return forked(sys_("clone3", args, 64))
+    def vsock():  # not network-namespaced: the host's vsock ports, whatever the box's network
+        import socket
+        try:
+            socket.socket(40, socket.SOCK_STREAM).close()
+            return 0
+        except OSError as e:
+            ctypes.set_errno(e.errno)
+            return -1
     def x32():  # getpid by its x32 number
         return sys_("x32_getpid")
     def i386():  # getpid through int 0x80
@@ -317,7 +336,7 @@ def test_commands_denied(argv, filtered):
 OPS = [
     ("ptrace", "EPERM"), ("bpf", "EPERM"), ("keyctl", "EPERM"), ("perf_event_open", "EPERM"),
     ("userfaultfd", "EPERM"), ("setns", "EPERM"), ("personality", "EPERM"),
-    ("clone_newuser", "EPERM"), ("clone3", "ENOSYS"),
+    ("clone_newuser", "EPERM"), ("clone3", "ENOSYS"), ("vsock", "EAFNOSUPPORT"),
 ]  # fmt: skip
 
 
