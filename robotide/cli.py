@@ -33,6 +33,7 @@ import contextlib
 import gc
 import json
 import os
+import resource
 import secrets
 import signal
 import socket
@@ -149,6 +150,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
     # What the server writes is its own; run accounts get only what is opened to them.
     os.umask(0o077)
+    if args.command in ("up", "agent"):
+        open_files_as_allowed()
     setup_django()
     return {
         "up": cmd_up,
@@ -295,6 +298,16 @@ def cmd_up(args, rest) -> int:
     else:
         asyncio.run(serve(host, port, with_agents=embedded))
     return 0
+
+
+def open_files_as_allowed(most: int = 65536) -> None:
+    """The server's open-files limit raised to what the system allows (systemd's soft 1024 is
+    for select(), which the server does not use): every connection of every run and viewer is
+    one. Runs get their own limit (RUN_DEFAULTS' open_files) in their box."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    wanted = most if hard == resource.RLIM_INFINITY else min(hard, most)
+    if soft != resource.RLIM_INFINITY and soft < wanted:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (wanted, hard))
 
 
 def parse_bind(bind: str) -> tuple[str, int]:

@@ -10,11 +10,13 @@ library speaks (Tcl has no Unix sockets).
 import asyncio
 import json
 import logging
+import os
 import re
 import socket
+import struct
 import time
 import traceback
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Awaitable, Callable
 from itertools import accumulate
 from typing import Any
@@ -33,6 +35,10 @@ LIMIT_REACHED = -32002  # a cap on what one run may make the robot hold (robots.
 MAX_REQUEST_BYTES = 1024 * 1024
 MAX_DEPTH = 64  # arrays and objects nested in a request, the batch's own array included
 MAX_BATCH = 1000  # requests in one batch
+# Connections at once from one run (its threads and processes): each costs the agent a file
+# descriptor, and a run may hold thousands (processes x open files) that would otherwise use
+# up the agent's, which are the web server's too in the embedded appliance.
+MAX_CONNECTIONS_PER_RUN = 64
 # One encoder for every reply: json.dumps() with options builds a new one each call.
 _encode = json.JSONEncoder(separators=(",", ":"), check_circular=False).encode
 
@@ -78,6 +84,8 @@ class RobotApiServer:
         self.unix_path = unix_path
         self._servers: list[asyncio.base_events.Server] = []
         self._connections: set[_Connection] = set()
+        self._open: Counter = Counter()  # connections now, by where they come from (peer_of)
+        self._refused_from: set = set()  # said in the log once each
 
     @property
     def address(self) -> str:
@@ -108,16 +116,37 @@ class RobotApiServer:
 
     async def start(self) -> str:
         loop = asyncio.get_running_loop()
-        factory = lambda: _Connection(self)  # noqa: E731
-        self._servers.append(await loop.create_server(factory, self.host, self.port))
+        self._servers.append(
+            await loop.create_server(lambda: _Connection(self, "host"), self.host, self.port)
+        )
         if self.unix_path:
+            factory = lambda: _Connection(self, PEER)  # noqa: E731
             self._servers.append(await loop.create_unix_server(factory, str(self.unix_path)))
         return self.address
 
     async def serve_socket(self, sock: socket.socket) -> "asyncio.Server":
-        """Serve on a socket made elsewhere too (one in a run's network namespace)."""
+        """Serve on a socket made elsewhere too (one in a run's network namespace): its
+        connections are one run's."""
         loop = asyncio.get_running_loop()
-        return await loop.create_server(lambda: _Connection(self), sock=sock)
+        source = object()
+        return await loop.create_server(lambda: _Connection(self, source), sock=sock)
+
+    def admit(self, source) -> bool:
+        """One more connection from `source`, unless it has MAX_CONNECTIONS_PER_RUN open."""
+        if self._open[source] >= MAX_CONNECTIONS_PER_RUN:
+            if source not in self._refused_from:
+                self._refused_from.add(source)
+                log.warning("Robot API: a run opened more than %d connections at once; the"
+                            " others are closed", MAX_CONNECTIONS_PER_RUN)  # fmt: skip
+            return False
+        self._open[source] += 1
+        return True
+
+    def release(self, source) -> None:
+        self._open[source] -= 1
+        if self._open[source] <= 0:
+            del self._open[source]
+            self._refused_from.discard(source)
 
     async def close(self) -> None:
         servers, self._servers = self._servers, []
@@ -177,6 +206,20 @@ class RobotApiServer:
         return None if "id" not in request else reply
 
 
+PEER = "peer"  # a listener several runs share: a connection's run is its peer's (see below)
+
+
+def peer_pid_namespace(sock) -> str:
+    """Which run a Unix connection comes from: the pid namespace of the process at the other
+    end (each run's box has its own; the host's processes share the host's)."""
+    try:
+        creds = sock.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, struct.calcsize("3i"))
+        pid = struct.unpack("3i", creds)[0]
+        return os.readlink(f"/proc/{pid}/ns/pid")
+    except (OSError, AttributeError):  # gone already, or not a socket of ours
+        return "unknown"
+
+
 class _Connection(asyncio.Protocol):
     """One client: requests are answered in order, one at a time.
 
@@ -186,8 +229,10 @@ class _Connection(asyncio.Protocol):
     a task per request is what makes ten thousand round trips a second possible.
     """
 
-    def __init__(self, server: RobotApiServer):
+    def __init__(self, server: RobotApiServer, source):
         self.server = server
+        self.source = source  # where it comes from: PEER (ask the socket), else its listener
+        self.admitted = False
         self.buffer = b""
         self.backlog: deque[bytes] = deque()
         self.busy = False
@@ -197,12 +242,21 @@ class _Connection(asyncio.Protocol):
     def connection_made(self, transport) -> None:
         self.transport = transport
         sock = transport.get_extra_info("socket")
+        if self.source is PEER:
+            self.source = peer_pid_namespace(sock)
+        if not self.server.admit(self.source):
+            transport.abort()
+            return
+        self.admitted = True
         if sock is not None and sock.family != socket.AF_UNIX:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.session = Session(transport.get_extra_info("peername"))
         self.server._connections.add(self)
 
     def connection_lost(self, exc) -> None:
+        if not self.admitted:
+            return
+        self.server.release(self.source)
         self.server._connections.discard(self)
         self.backlog.clear()
         if self.server.closed is not None:

@@ -10,6 +10,7 @@ import socket
 
 UDP_MAX = 65535
 UDP_PEERS_MAX = 64  # distinct sockets of one run talking through one UDP relay
+TCP_CONNECTIONS_MAX = 64  # connections at once through one TCP relay (two agent fds each)
 
 
 class Relay:
@@ -30,6 +31,9 @@ class TcpRelay(Relay):
         return self
 
     async def _accepted(self, reader, writer) -> None:
+        if len(self.pipes) >= TCP_CONNECTIONS_MAX:  # the run's fds must not use up the agent's
+            writer.close()
+            return
         task = asyncio.current_task()
         self.pipes.add(task)
         try:

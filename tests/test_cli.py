@@ -5,6 +5,7 @@ import re
 import shutil
 import signal
 import subprocess
+import sys
 
 import httpx
 
@@ -76,3 +77,17 @@ def test_bad_bind_is_refused(tmp_path):
     proc = start(tmp_path, "x")
     proc.wait(timeout=30)
     assert proc.returncode != 0 and "HOST:PORT" in proc.stdout.read()
+
+
+def test_the_server_raises_its_open_files_limit_to_what_the_system_allows():
+    """systemd starts services with a soft limit of 1024 open files; every connection of every
+    run and viewer is one of them."""
+    code = (
+        "import resource; from robotide.cli import open_files_as_allowed;"
+        "open_files_as_allowed(); print(*resource.getrlimit(resource.RLIMIT_NOFILE))"
+    )
+    done = subprocess.run(
+        ["prlimit", "--nofile=1024:4096", sys.executable, "-c", code],
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    assert done.stdout.split() == ["4096", "4096"]

@@ -2,10 +2,11 @@
 
 import asyncio
 import json
+import socket
 
 import pytest
 
-from robots.rpc import RobotApiServer, RpcError
+from robots.rpc import MAX_CONNECTIONS_PER_RUN, RobotApiServer, RpcError
 
 
 async def handler(session, method, params):
@@ -105,3 +106,42 @@ async def test_quick_methods_are_answered_in_order_with_slow_ones():
     assert [r["id"] for r in replies] == [0, 1, 2, 3]
     writer.close()
     await server.close()
+
+
+async def served(reader, writer) -> bool:
+    """Whether the server answers on this connection (a closed one reads as EOF)."""
+    try:
+        writer.write((request(1, "echo", "hi") + "\n").encode())
+        await writer.drain()
+        return bool(await asyncio.wait_for(reader.readline(), 5))
+    except (ConnectionError, OSError):
+        return False
+
+
+async def test_one_run_may_hold_only_so_many_connections(tmp_path):
+    """Each connection costs the agent a file descriptor: past MAX_CONNECTIONS_PER_RUN a run's
+    next ones are closed (on a listener in its box, and on the Unix socket its runs share,
+    where the peer's pid namespace says whose it is); one closed makes room again."""
+    server = RobotApiServer(handler, unix_path=tmp_path / "api.sock")
+    await server.start()
+    inside = socket.socket()
+    inside.bind(("127.0.0.1", 0))
+    inside.listen()
+    await server.serve_socket(inside)
+    try:
+        for connect in (
+            lambda: asyncio.open_unix_connection(str(tmp_path / "api.sock")),
+            lambda: asyncio.open_connection(*inside.getsockname()),
+        ):
+            clients = [await connect() for _ in range(MAX_CONNECTIONS_PER_RUN + 20)]
+            answers = [await served(*client) for client in clients]
+            assert answers == [True] * MAX_CONNECTIONS_PER_RUN + [False] * 20
+            clients[0][1].close()
+            await asyncio.sleep(0.1)
+            assert await served(*await connect())
+            for _, writer in clients:
+                writer.close()
+            await asyncio.sleep(0.1)
+    finally:
+        await server.close()
+        inside.close()

@@ -224,6 +224,64 @@ print("REPLY", s.makefile().readline())
     assert reply["error"]["code"] == -32001, log
 
 
+def test_a_run_holds_only_so_many_robot_api_connections(app):
+    """Each connection costs the agent (the web server too, embedded) a file descriptor, and a
+    run may hold thousands: from four processes, 25 each on the Unix socket the robot's runs
+    share and on the TCP port in its namespace, the agent serves 64 a side and closes the rest;
+    a second run still gets its own 64, and the server serves on."""
+    source = """
+import json, os, socket, sys
+def serve_count(make):
+    served, held = 0, []
+    for _ in range(25):
+        s = make()
+        held.append(s)
+        s.settimeout(2)
+        try:  # one the agent closed at once: a broken pipe or an empty read
+            s.sendall(b'{"jsonrpc": "2.0", "id": 1, "method": "sensors"}\\n')
+            served += bool(s.recv(100))
+        except OSError:
+            pass
+    return served, held
+def over_unix():
+    s = socket.socket(socket.AF_UNIX)
+    s.connect(os.environ["ROBOT_API"][len("unix:"):])
+    return s
+def over_tcp():
+    host, port = os.environ["ROBOT_API_TCP"].split(":")
+    return socket.create_connection((host, int(port)))
+counts_r, counts_w = os.pipe()
+release_r, release_w = os.pipe()
+children = []
+for _ in range(4):
+    pid = os.fork()
+    if pid == 0:
+        counts = [serve_count(over_unix), serve_count(over_tcp)]
+        os.write(counts_w, f"{counts[0][0]} {counts[1][0]}\\n".encode())
+        os.read(release_r, 1)  # hold them until all have counted
+        os._exit(0)
+    children.append(pid)
+got = b""
+while got.count(b"\\n") < 4:
+    got += os.read(counts_r, 100)
+lines = got.decode().split()
+print("SERVED", [sum(int(n) for n in lines[i::2]) for i in (0, 1)])
+os.write(release_w, b"x" * 4)
+for pid in children:
+    os.waitpid(pid, 0)
+"""
+    first = app.create_program("holder", source)
+    first_run = app.run_program(first["id"], robot="lab")["id"]
+    second = app.create_program("second holder", source)
+    second_run = app.run_program(second["id"], robot="lab")["id"]
+    for run_id in (first_run, second_run):
+        run = app.wait_run(run_id, timeout=60)
+        log = app.api("GET", f"/api/runs/{run_id}/log").text
+        assert run["state"] == "finished", log
+        assert "SERVED [64, 64]" in log, log
+    assert_serving(app)
+
+
 def test_markup_in_output_and_shown_values_stays_text(app):
     source = (
         "import robot\nprint('<script>alert(1)</script><b>bold</b>')\n"
