@@ -2,6 +2,7 @@
 
 import asyncio
 import logging
+import re
 from urllib.parse import parse_qs, urlencode
 
 from channels.db import database_sync_to_async
@@ -40,20 +41,28 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
 
     async def connect(self):
         run_id = self.scope["url_route"]["kwargs"]["run_id"]
+        page_offset = shown_up_to(self.scope)  # read before joining: nothing to undo if bad
         # Join first, then read the file: lines already in it are skipped by offset. Nothing
         # of the group reaches a viewer who may not see the run: its events wait for
         # connect() to return, and then it has left the group.
         self.group = run_group(run_id)
         await self.channel_layer.group_add(self.group, self.channel_name)
-        first = await self.see_run(run_id, shown_up_to(self.scope))
+        try:
+            first = await self.see_run(run_id, page_offset)
+        except BaseException:  # leave no member behind in the run's group
+            await self.leave_run_group()
+            raise
         if first is None:
-            await self.channel_layer.group_discard(self.group, self.channel_name)
-            self.group = None
+            await self.leave_run_group()
             await self.close(code=4404)
             return
         await self.accept()
         await self.send(first)
         await self.send_status()
+
+    async def leave_run_group(self):
+        await self.channel_layer.group_discard(self.group, self.channel_name)
+        self.group = None
 
     def seen(self, run_id: int, page_offset: int | None) -> str | None:
         """The run if this viewer may see it, and what the page lacks of its log."""
@@ -235,10 +244,15 @@ class RunListConsumer(DirectDispatch, AsyncWebsocketConsumer):
 
 
 def query_param(scope, name: str) -> str | None:
-    values = parse_qs(scope["query_string"].decode()).get(name)
+    values = parse_qs(scope["query_string"].decode(errors="replace")).get(name)
     return values[0] if values else None
 
 
+OFFSET = re.compile(r"[0-9]{1,18}")
+
+
 def shown_up_to(scope) -> int | None:
+    """The log offset the page was rendered with; None (a fresh tail) if absent or not plain
+    ASCII digits: str.isdigit() passes "²", which int() refuses, and "١", which it takes."""
     value = query_param(scope, "from")
-    return int(value) if value and value.isdigit() else None
+    return int(value) if value and OFFSET.fullmatch(value) else None

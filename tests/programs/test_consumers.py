@@ -182,6 +182,31 @@ async def test_a_page_rendered_with_the_log_gets_only_what_came_after():
     await comm.disconnect()
 
 
+# Not an offset of ASCII digits: "²" passes str.isdigit() but not int(), "١" (Arabic-Indic
+# one) passes both, a raw byte is not UTF-8; a sign, or more digits than an offset has.
+NOT_AN_OFFSET = [b"from=%C2%B2", b"from=%D9%A1", b"from=\xff", b"from=-1", b"from=+5",
+                 b"from=99999999999999999999999"]  # fmt: skip
+
+
+@pytest.mark.parametrize("query", NOT_AN_OFFSET)
+async def test_a_bad_offset_gets_the_whole_tail_and_leaves_no_one_in_the_group(query):
+    alice, bob, run = await make_run(b"o one\no two\n")
+    layer, group = get_channel_layer(), run_group(run.pk)
+    comm = communicator(RunConsumer, f"/ws/runs/{run.pk}/", bob, run_id=run.pk)
+    comm.scope["query_string"] = query
+    assert not (await comm.connect())[0]  # turned away, and out of the run's group again
+    assert not layer.groups.get(group)
+    comm = communicator(RunConsumer, f"/ws/runs/{run.pk}/", alice, run_id=run.pk)
+    comm.scope["query_string"] = query
+    assert (await comm.connect())[0]
+    assert await comm.receive_from() == (
+        '<div id="log-lines"><div class="ln o">one</div><div class="ln o">two</div></div>'
+    )
+    assert 'id="run-status"' in await comm.receive_from()
+    await comm.disconnect()
+    assert not layer.groups.get(group)
+
+
 async def test_the_run_list_keeps_what_staff_see_and_where_stop_returns():
     alice, _, run = await make_run(b"")
     staff = await database_sync_to_async(teacher_of)(alice)
