@@ -289,8 +289,9 @@ class RobotApi:
         if sub is None:
             raise ValueError(f"subscribe to {topic!r} before receiving from it")
         if timeout is not None and (
-            isinstance(timeout, bool) or not isinstance(timeout, int | float) or timeout < 0
-        ):
+            isinstance(timeout, bool) or not isinstance(timeout, int | float)
+            or not math.isfinite(timeout) or timeout < 0
+        ):  # fmt: skip
             raise ValueError("timeout must be a number of seconds, or null to wait for ever")
         if details is not None and not isinstance(details, bool):
             raise ValueError("details must be true or false")

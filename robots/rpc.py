@@ -10,6 +10,7 @@ library speaks (Tcl has no Unix sockets).
 import asyncio
 import json
 import logging
+import math
 import os
 import re
 import socket
@@ -39,6 +40,22 @@ MAX_BATCH = 1000  # requests in one batch
 # descriptor, and a run may hold thousands (processes x open files) that would otherwise use
 # up the agent's, which are the web server's too in the embedded appliance.
 MAX_CONNECTIONS_PER_RUN = 64
+
+
+def _finite(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):  # 1e400: an overflow JSON cannot mean
+        raise ValueError(f"number out of range: {text[:40]}")
+    return value
+
+
+def _no_constant(name: str):
+    raise ValueError(f"{name} is not JSON")
+
+
+# Strict JSON: Python's json takes NaN and Infinity, and a NaN that reaches a timeout or a
+# timer corrupts the event loop's schedule for every robot and page it serves.
+_decode = json.JSONDecoder(parse_float=_finite, parse_constant=_no_constant).decode
 # One encoder for every reply: json.dumps() with options builds a new one each call.
 _encode = json.JSONEncoder(separators=(",", ":"), check_circular=False).encode
 
@@ -170,7 +187,7 @@ class RobotApiServer:
         if len(line) > MAX_DEPTH and too_deep(line):
             return _error(None, PARSE_ERROR, f"parse error: nested deeper than {MAX_DEPTH} levels")
         try:
-            message = json.loads(line)
+            message = _decode(line.decode() if isinstance(line, bytes) else line)
         except (ValueError, UnicodeDecodeError) as exc:
             return _error(None, PARSE_ERROR, f"parse error: {exc}")
         except RecursionError:  # too_deep() is exact for JSON; this is a second line of defence

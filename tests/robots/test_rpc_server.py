@@ -145,3 +145,17 @@ async def test_one_run_may_hold_only_so_many_connections(tmp_path):
     finally:
         await server.close()
         inside.close()
+
+
+@pytest.mark.parametrize("number", ["NaN", "Infinity", "-Infinity", "1e400", "-1e999"])
+async def test_numbers_json_cannot_mean_are_a_parse_error(server, number):
+    """Python's json reads NaN and Infinity (and 1e400 as infinity): a NaN timeout put in the
+    event loop's schedule makes every timer of the agent late, robots' and pages' alike."""
+    reader, writer = await open_client(server)
+    line = f'{{"jsonrpc": "2.0", "id": 1, "method": "wait", "params": [{number}]}}\n'
+    writer.write(line.encode() + (request(2, "echo", 1.5) + "\n").encode())
+    first = json.loads(await asyncio.wait_for(reader.readline(), 5))
+    second = json.loads(await asyncio.wait_for(reader.readline(), 5))
+    assert first["error"]["code"] == -32700, first
+    assert second["result"] == [1.5]
+    writer.close()
