@@ -670,7 +670,8 @@ class RobotAgent:
     async def drive_for(self, holder: Holder, linear: float, angular: float):
         """Drive as `holder`, who must hold the lease (LeaseHeld else). An emergency stop
         that comes while the command is on its way has the last word: the robot is stopped
-        again after it, and the caller told."""
+        again after it, and the caller told. So does the holder's losing the lease meanwhile
+        (its run ended, staff took over): nobody would stop what it sent."""
         self.take_lease(holder)
         estops = self.estops
         applied = await self.driver.drive(linear, angular)
@@ -678,6 +679,10 @@ class RobotAgent:
             with contextlib.suppress(rhal.RhalError):
                 await self.driver.stop()
             raise LeaseHeld(f"{self.lease.holder.describe()} came first: the robot stays stopped")
+        if self.lease.holder is None or self.lease.holder.key != holder.key:
+            with contextlib.suppress(rhal.RhalError):
+                await self.driver.stop()
+            raise LeaseHeld("the robot's control ended while this command was on its way")
         self.motion_owner = holder.key
         return applied
 
