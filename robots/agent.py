@@ -582,9 +582,11 @@ class RobotAgent:
 
     async def _watch(self, active: ActiveRun) -> None:
         outcome = await active.process.wait()
-        # The token dies with the run, before anything else can use it.
+        # The token dies with the run, before anything else can use it, and so do the
+        # connections it signed in (another program may hold them), with what they hold.
         self.tokens.pop(active.token, None)
         self.runs.pop(active.run_id, None)
+        self.server.close_where(lambda session: session.run is active)
         # Its motion ends with it, however it ended, and so does its control of the robot.
         await self.stop_motion_of(active.run_id)
         if self.lease.release(active.run_id):

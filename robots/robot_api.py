@@ -11,6 +11,7 @@ from robots.host_services import HostServices
 from robots.lease import Holder, LeaseHeld
 from robots.rpc import (
     INVALID_PARAMS,
+    INVALID_REQUEST,
     LIMIT_REACHED,
     METHOD_NOT_FOUND,
     ROBOT_ERROR,
@@ -139,6 +140,8 @@ class RobotApi:
         # straight from data_received once it has come, as every quick method).
         if active is None or not await active.confirmed():
             raise RpcError(UNAUTHORIZED, "invalid token: it belongs to no running program")
+        if session.run is not None:  # its subscriptions and caps are that run's
+            raise RpcError(INVALID_REQUEST, "this connection is signed in already")
         session.run = active
         return {"robot": self.agent.name, "run": active.run_id}
 

@@ -148,6 +148,12 @@ class RobotApiServer:
         source = object()
         return await loop.create_server(lambda: _Connection(self, source), sock=sock)
 
+    def close_where(self, belongs: Callable[[Session], bool]) -> None:
+        """Close the connections whose session `belongs` (a run's, once it has ended)."""
+        for connection in list(self._connections):
+            if belongs(connection.session):
+                connection.transport.close()
+
     def admit(self, source) -> bool:
         """One more connection from `source`, unless it has MAX_CONNECTIONS_PER_RUN open."""
         if self._open[source] >= MAX_CONNECTIONS_PER_RUN:

@@ -68,3 +68,33 @@ async def test_a_drive_that_lands_after_its_run_ended_is_stopped(agent, monkeypa
     await asyncio.sleep(0.3)  # the command, and whatever follows it, has landed
     assert (await agent.driver.sensors())["velocity"]["linear"] == 0.0
     assert agent.lease.holder is None and agent.motion_owner is None
+
+
+async def test_connections_a_run_signed_in_end_with_it(agent, monkeypatch):
+    """Another program may hold connections signed in with a run's token (handed over through
+    the shared memory, say): they close when that run ends, and what they held goes with them
+    (subscriptions count against the robot's caps). A connection signs in once."""
+    agent.isolation = None
+
+    async def ended(*_):
+        pass
+
+    monkeypatch.setattr(agent, "_end_run", ended)
+    process = EndsWhenTold()
+    short = ActiveRun(8, "short-token", process, user="mallory")
+    agent.tokens[short.token], agent.runs[8] = short, short
+    short.watcher = asyncio.create_task(agent._watch(short))
+    host, port = agent.api_address.rsplit(":", 1)
+    reader, writer = await asyncio.open_connection(host, int(port))
+    writer.write(line(1, "auth", "short-token") + line(2, "subscribe", "loot"))
+    assert "result" in json.loads(await reader.readline())
+    assert "result" in json.loads(await reader.readline())
+    writer.write(line(3, "auth", "short-token"))
+    assert json.loads(await reader.readline())["error"]["code"] == -32600
+    assert agent.api.subscriptions == 1
+    process.exited.set_result(None)
+    await short.watcher
+    assert await asyncio.wait_for(reader.read(), 5) == b""  # closed by the agent
+    await asyncio.sleep(0.05)
+    assert agent.api.subscriptions == 0
+    writer.close()
