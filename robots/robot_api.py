@@ -97,7 +97,7 @@ class RobotApi:
         self.queued_by_run: dict[int, int] = {}
         self.subscriptions = 0
         self.subscriptions_by_run: dict[int, int] = {}
-        self.memory = SharedMemory()
+        self.memory = SharedMemory(running=lambda run: run in self.agent.runs)
         self.show_costs: dict[str, tuple[int, int]] = {}  # shown name -> (run, bytes)
 
     def quick(self, method: str) -> bool:
@@ -353,10 +353,11 @@ class SharedMemory:
     and per run (the run that last set a key answers for it). Reads and writes as a dict of
     values too (``memory[key]``), as tests do."""
 
-    def __init__(self):
+    def __init__(self, running=lambda run: True):
         self.entries: dict[str, tuple[str, int, int]] = {}  # key -> (JSON text, run, bytes)
         self.bytes = 0
         self.by_run: dict[int, list[int]] = {}  # run -> [keys, bytes] it last set
+        self.running = running  # running(run): whether that run is still on
 
     def put(self, key: str, text: str, run: int) -> None:
         old = self.entries.get(key)
@@ -364,18 +365,32 @@ class SharedMemory:
         old_cost = old[2] if old is not None else 0
         mine = self.by_run.get(run, [0, 0])
         same_run = old is not None and old[1] == run
-        if old is None and len(self.entries) >= MAX_MEMORY_KEYS:
-            raise LimitReached(_memory_full(f"at most {MAX_MEMORY_KEYS} keys"))
         if mine[0] + (0 if same_run else 1) > MAX_MEMORY_KEYS_RUN:
             raise LimitReached(_memory_full(f"a run sets at most {MAX_MEMORY_KEYS_RUN} keys"))
         if mine[1] + cost - (old_cost if same_run else 0) > MAX_MEMORY_BYTES_RUN:
             raise LimitReached(_memory_full(f"a run sets at most {MAX_MEMORY_BYTES_RUN // MB} MB"))
+        self.make_room(key, cost - old_cost, new_key=old is None)
+        if old is None and len(self.entries) >= MAX_MEMORY_KEYS:
+            raise LimitReached(_memory_full(f"at most {MAX_MEMORY_KEYS} keys"))
         if self.bytes - old_cost + cost > MAX_MEMORY_BYTES:
             raise LimitReached(_memory_full(f"{MAX_MEMORY_BYTES // MB} MB in all"))
         if old is not None:
             self._account(old[1], -1, -old_cost)
         self.entries[key] = (text, run, cost)
         self._account(run, 1, cost)
+
+    def make_room(self, key: str, more: int, new_key: bool) -> None:
+        """Keys stay after their program ends, until the room is needed: then the oldest set
+        by ended runs go, as shown values do (else ended runs would fill it for good)."""
+        for other, (_, run, cost) in list(self.entries.items()):
+            full = (new_key and len(self.entries) >= MAX_MEMORY_KEYS) or (
+                self.bytes + more > MAX_MEMORY_BYTES
+            )
+            if not full:
+                return
+            if other != key and not self.running(run):
+                del self.entries[other]
+                self._account(run, -1, -cost)
 
     def _account(self, run: int, keys: int, cost: int) -> None:
         self.bytes += cost

@@ -252,6 +252,25 @@ async def test_the_shared_memory_is_capped_per_run_and_per_robot(agent):
     b.close()
 
 
+async def test_keys_of_ended_runs_make_room_for_a_running_one(agent):
+    """The memory keeps what ended programs set (for the next program to read) until the
+    room is needed: then their oldest keys go, or two runs of 500 keys fill it for good."""
+    for run_id in (1, 2):
+        admit(agent, f"tok-{run_id}", run_id)
+        conn = await connect(agent.api_address, f"tok-{run_id}")
+        replies = await conn.pipelined([("memory_set", f"r{run_id}k{n}", n) for n in range(500)])
+        assert all("result" in r for r in replies)
+        conn.close()
+        del agent.tokens[f"tok-{run_id}"], agent.runs[run_id]  # the run ended
+    admit(agent, "tok-3", 3)
+    conn = await connect(agent.api_address, "tok-3")
+    assert "result" in await conn.call("memory_set", "score", 1)
+    assert (await conn.call("memory_get", "r1k0"))["result"] is None  # the oldest went
+    assert (await conn.call("memory_get", "r2k499"))["result"] == 499  # the newest stayed
+    assert len(agent.api.memory) == 1000
+    conn.close()
+
+
 async def test_shown_values_are_capped_per_run(agent):
     admit(agent, "tok", 1)
     conn = await connect(agent.api_address, "tok")
