@@ -49,6 +49,20 @@ def _finite(text: str) -> float:
     return value
 
 
+def _lone_surrogate(value) -> bool:
+    if isinstance(value, str):
+        try:
+            value.encode()
+        except UnicodeEncodeError:
+            return True
+        return False
+    if isinstance(value, dict):
+        return any(_lone_surrogate(k) or _lone_surrogate(v) for k, v in value.items())
+    if isinstance(value, list):
+        return any(_lone_surrogate(v) for v in value)
+    return False
+
+
 def _no_constant(name: str):
     raise ValueError(f"{name} is not JSON")
 
@@ -193,11 +207,15 @@ class RobotApiServer:
         if len(line) > MAX_DEPTH and too_deep(line):
             return _error(None, PARSE_ERROR, f"parse error: nested deeper than {MAX_DEPTH} levels")
         try:
-            message = _decode(line.decode() if isinstance(line, bytes) else line)
+            message = _decode(line.decode())
         except (ValueError, UnicodeDecodeError) as exc:
             return _error(None, PARSE_ERROR, f"parse error: {exc}")
         except RecursionError:  # too_deep() is exact for JSON; this is a second line of defence
             return _error(None, PARSE_ERROR, f"parse error: nested deeper than {MAX_DEPTH} levels")
+        # "\ud800" alone decodes to a str no UTF-8 can carry: it would break whatever shows
+        # or sends it on (the robot's page, the channel layer). Looked for only after a \u.
+        if b"\\u" in line and _lone_surrogate(message):
+            return _error(None, PARSE_ERROR, "parse error: a lone surrogate (\\ud800-\\udfff)")
         if isinstance(message, list):
             if not message:
                 return _error(None, INVALID_REQUEST, "empty batch")

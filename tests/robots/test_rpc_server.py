@@ -159,3 +159,18 @@ async def test_numbers_json_cannot_mean_are_a_parse_error(server, number):
     assert first["error"]["code"] == -32700, first
     assert second["result"] == [1.5]
     writer.close()
+
+
+@pytest.mark.parametrize("text", [r"\ud800", r"\uDFFF", r"x\udc00y"])
+async def test_a_lone_surrogate_is_a_parse_error(server, text):
+    """JSON's \\ud800 alone decodes to a string UTF-8 cannot carry: shown on the robot's page or
+    sent through the channel layer it broke them, for everyone. A pair is a character."""
+    reader, writer = await open_client(server)
+    bad = f'{{"jsonrpc": "2.0", "id": 1, "method": "echo", "params": [{{"{text}": 1}}]}}\n'
+    pair = '{"jsonrpc": "2.0", "id": 2, "method": "echo", "params": ["\\ud83d\\ude00"]}\n'
+    writer.write(bad.encode() + pair.encode())
+    first = json.loads(await asyncio.wait_for(reader.readline(), 5))
+    second = json.loads(await asyncio.wait_for(reader.readline(), 5))
+    assert first["error"]["code"] == -32700, first
+    assert second["result"] == ["\N{GRINNING FACE}"]
+    writer.close()
