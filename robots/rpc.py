@@ -36,6 +36,7 @@ LIMIT_REACHED = -32002  # a cap on what one run may make the robot hold (robots.
 MAX_REQUEST_BYTES = 1024 * 1024
 MAX_DEPTH = 64  # arrays and objects nested in a request, the batch's own array included
 MAX_BATCH = 1000  # requests in one batch
+MAX_BATCH_REPLY_BYTES = 4 * 2**20  # a batch's replies, held until the last is made
 # Connections at once from one run (its threads and processes): each costs the agent a file
 # descriptor, and a run may hold thousands (processes x open files) that would otherwise use
 # up the agent's, which are the web server's too in the embedded appliance.
@@ -194,6 +195,24 @@ class RobotApiServer:
         for server in servers:
             await server.wait_closed()
 
+    async def _batch(self, session: Session, requests: list):
+        """A batch's replies, in one piece: past MAX_BATCH_REPLY_BYTES the rest are refused
+        (a small batch of large answers would make the server hold them all at once)."""
+        replies, size = [], 0
+        for request in requests:
+            if size > MAX_BATCH_REPLY_BYTES:
+                if isinstance(request, dict) and "id" not in request:
+                    continue  # a notification: no reply, even refused
+                req_id = request.get("id") if isinstance(request, dict) else None
+                why = f"the batch's replies passed {MAX_BATCH_REPLY_BYTES // 2**20} MB: ask again"
+                replies.append(_error(req_id, LIMIT_REACHED, why))
+                continue
+            reply = await self.handle_request(session, request)
+            if reply is not None:
+                replies.append(reply)
+                size += len(_encode(reply))
+        return replies or None
+
     async def handle_line(self, session: Session, line: bytes):
         """The reply to one line (None for notifications only); never raises."""
         try:
@@ -221,8 +240,7 @@ class RobotApiServer:
                 return _error(None, INVALID_REQUEST, "empty batch")
             if len(message) > MAX_BATCH:
                 return _error(None, INVALID_REQUEST, f"batch of more than {MAX_BATCH} requests")
-            replies = [await self.handle_request(session, m) for m in message]
-            return [r for r in replies if r is not None] or None
+            return await self._batch(session, message)
         return await self.handle_request(session, message)
 
     async def handle_request(self, session: Session, request):
@@ -312,6 +330,7 @@ class _Connection(asyncio.Protocol):
 
     def resume_writing(self) -> None:
         self.write_paused = False
+        self.answer_backlog()  # what waited for the client to read its replies
         self.flow()
 
     def flow(self) -> None:
@@ -342,7 +361,11 @@ class _Connection(asyncio.Protocol):
         return self.server.handle_line(self.session, line)
 
     def answer_backlog(self) -> None:
-        while self.backlog and not self.busy and not self.transport.is_closing():
+        # Not while the client leaves its replies unread: they would pile up here.
+        while (
+            self.backlog and not self.busy and not self.write_paused
+            and not self.transport.is_closing()
+        ):  # fmt: skip
             line = self.backlog.popleft()
             work = self.answer(line)
             if not self.server.answers_at_once(line):

@@ -1,12 +1,18 @@
 """The JSON-RPC server on its own: handlers that answer at once and handlers that wait."""
 
 import asyncio
+import contextlib
 import json
 import socket
 
 import pytest
 
-from robots.rpc import MAX_CONNECTIONS_PER_RUN, RobotApiServer, RpcError
+from robots.rpc import (
+    MAX_BATCH_REPLY_BYTES,
+    MAX_CONNECTIONS_PER_RUN,
+    RobotApiServer,
+    RpcError,
+)
 
 
 async def handler(session, method, params):
@@ -15,6 +21,8 @@ async def handler(session, method, params):
         return f"waited {params[0]}"
     if method == "echo":
         return params
+    if method == "big":  # a large answer to a small question (a camera's snapshot)
+        return "x" * params[0]
     if method == "fail":
         raise RpcError(-32000, "no")
     if method == "crash":
@@ -173,4 +181,36 @@ async def test_a_lone_surrogate_is_a_parse_error(server, text):
     second = json.loads(await asyncio.wait_for(reader.readline(), 5))
     assert first["error"]["code"] == -32700, first
     assert second["result"] == ["\N{GRINNING FACE}"]
+    writer.close()
+
+
+async def test_a_batch_of_large_replies_is_cut_where_they_pass_the_cap(server):
+    """A batch's replies are held until its last is made: past MAX_BATCH_REPLY_BYTES the rest
+    are refused, each saying so (a 53 KB batch of snapshots made the server hold 89 MB)."""
+    reader, writer = await asyncio.open_connection(*server.address.rsplit(":", 1), limit=2**26)
+    batch = [{"jsonrpc": "2.0", "id": i, "method": "big", "params": [100_000]} for i in range(100)]
+    writer.write(json.dumps(batch).encode() + b"\n")
+    replies = json.loads(await asyncio.wait_for(reader.readline(), 10))
+    answered = [r for r in replies if "result" in r]
+    refused = [r for r in replies if "error" in r]
+    assert len(replies) == 100 and [r["id"] for r in replies] == list(range(100))
+    assert len(answered) * 100_000 <= MAX_BATCH_REPLY_BYTES + 200_000 and refused
+    assert refused[0]["error"]["code"] == -32002 and "ask again" in refused[0]["error"]["message"]
+    writer.close()
+
+
+async def test_a_client_that_reads_no_replies_makes_the_server_hold_little(server):
+    """Requests keep coming, replies are never read: the server stops answering (and reading)
+    until the client reads, instead of queueing its replies."""
+    reader, writer = await asyncio.open_connection(*server.address.rsplit(":", 1), limit=2**20)
+    writer.write("".join(request(i, "big", 100_000) + "\n" for i in range(300)).encode())
+    with contextlib.suppress(asyncio.TimeoutError):
+        await asyncio.wait_for(writer.drain(), 2)
+    await asyncio.sleep(0.5)
+    (connection,) = server._connections
+    assert connection.transport.get_write_buffer_size() < 2 * 2**20
+    got = 0
+    while got < 300:  # and once read, every reply comes
+        json.loads(await asyncio.wait_for(reader.readline(), 10))
+        got += 1
     writer.close()
