@@ -320,6 +320,8 @@ class RobotApi:
         """A connection gone: its subscriptions with it, and what waited in them."""
         subscriptions, session.subscriptions = session.subscriptions, {}
         for topic, sub in subscriptions.items():
+            if sub.waiter is not None and not sub.waiter.done():
+                sub.waiter.cancel()  # its receive ends now, not as a task left pending
             subs = self.topics.get(topic)
             if subs is not None:
                 subs.pop(sub, None)

@@ -347,3 +347,22 @@ async def test_a_bug_is_an_internal_error_with_a_log_line_not_a_flood(logged):
         conn.close()
     finally:
         await server.close()
+
+
+async def test_a_receive_waiting_when_its_connection_closes_ends_with_it(agent):
+    """Else each such connection leaves a task pending for good (and, once collected, an
+    error in the log): a program could open, receive(topic, null) and close in a loop."""
+    admit(agent, "tok", 1)
+    before = len(asyncio.all_tasks())
+    for _ in range(20):
+        conn = await connect(agent.api_address, "tok")
+        assert "result" in await conn.call("subscribe", "never")
+        conn.writer.write(
+            b'{"jsonrpc": "2.0", "id": 9, "method": "receive", "params": ["never", null]}\n'
+        )
+        await conn.writer.drain()
+        await asyncio.sleep(0.02)
+        conn.close()
+    await asyncio.sleep(0.2)
+    assert len(asyncio.all_tasks()) <= before + 1
+    assert agent.api.subscriptions == 0
