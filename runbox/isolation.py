@@ -194,6 +194,9 @@ class InForce:
             "--ro-bind", "/usr", "/usr", "--ro-bind", "/etc", "/etc",
             "--proc", "/proc", "--dev", "/dev",
             "--perms", "1777", "--size", str(self.policy.tmp_mb * 1024 * 1024), "--tmpfs", "/tmp",
+            # POSIX shared memory and semaphores (multiprocessing's): bubblewrap's is root's.
+            "--perms", "1777", "--size", str(self.policy.tmp_mb * 1024 * 1024),
+            "--tmpfs", "/dev/shm",
             # Mount points' parents: bubblewrap would make them 0700, closed to the run.
             *(arg for d in ("/home", "/run", "/opt", "/opt/robotide")
               for arg in ("--perms", "0755", "--dir", d)),

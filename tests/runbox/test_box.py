@@ -212,3 +212,18 @@ print("fds", sorted(int(fd) for fd in os.listdir("/proc/self/fd")))
     result = box_run(mode, readable_copy, source)
     assert result["state"] == "finished", result["log"]
     assert "fds [0, 1, 2, 3]" in result["log"], result["log"]  # 3: the listing's own
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_the_run_has_a_shared_memory_folder_of_its_own(mode, readable_copy):
+    """POSIX shared memory and semaphores (multiprocessing's locks and queues) live in
+    /dev/shm: the run's own, writable, sized as its /tmp."""
+    source = """
+import multiprocessing, os
+lock = multiprocessing.Lock()
+with lock:
+    print("lock ok", oct(os.stat("/dev/shm").st_mode & 0o7777))
+"""
+    result = box_run(mode, readable_copy, source)
+    assert result["state"] == "finished", result["log"]
+    assert "lock ok 0o1777" in result["log"]
