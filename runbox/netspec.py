@@ -2,8 +2,8 @@
 
 import ipaddress
 
-# Never reachable from a `full` run unless a robot's `allow_networks` names one: the host's
-# loopback, the private and link-local ranges (a LAN's servers, a cloud's metadata address).
+# Never reachable from a `full` run unless a robot's `allow_networks` names one: the private
+# and link-local ranges (a LAN's servers, a cloud's metadata address).
 PRIVATE_RANGES = (
     "0.0.0.0/8", "10.0.0.0/8", "100.64.0.0/10", "127.0.0.0/8", "169.254.0.0/16",
     "172.16.0.0/12", "192.0.0.0/24", "192.168.0.0/16", "198.18.0.0/15", "224.0.0.0/4",
@@ -56,12 +56,18 @@ def host_addresses(fib_trie: str = "/proc/net/fib_trie") -> list[str]:
     return sorted(found)
 
 
+# Shut whatever a robot allows: 0.0.0.0 and the loopback are this machine (so are its own
+# addresses, found at the box's start), where PostgreSQL, Redis and the web server listen.
+ALWAYS_SHUT = ("0.0.0.0/8", "127.0.0.0/8")
+
+
 def blocked_ranges(allowed: tuple[str, ...], own: list[str] = ()) -> list[str]:
-    """The private ranges and this machine's own addresses, minus what is allowed, as routes
-    that refuse (whole ranges are split around an allowed part)."""
+    """The private ranges minus what is allowed, then this machine's loopback and own
+    addresses whatever is allowed, as routes that refuse (a range is split around an allowed
+    part; an allowed LAN the host is on stays open but for the host)."""
     allowed_nets = [ipaddress.ip_network(a) for a in allowed]
     blocked: list[ipaddress.IPv4Network] = []
-    for text in (*PRIVATE_RANGES, *(f"{address}/32" for address in own)):
+    for text in PRIVATE_RANGES:
         parts = [ipaddress.ip_network(text)]
         for keep in allowed_nets:
             parts = [
@@ -73,4 +79,6 @@ def blocked_ranges(allowed: tuple[str, ...], own: list[str] = ()) -> list[str]:
                 )
             ]  # fmt: skip
         blocked += parts
+    blocked += [ipaddress.ip_network(text) for text in ALWAYS_SHUT]
+    blocked += [ipaddress.ip_network(f"{address}/32") for address in own]
     return list(dict.fromkeys(str(net) for net in blocked))
