@@ -279,20 +279,28 @@ class BwrapBox(Box):
         self.script_r, self.script_w = os.pipe()
         self._fds |= {self.info_r, self.info_w, self.block_r, self.block_w}
         self._fds |= {self.script_r, self.script_w}
+        self.resolv_r = None
+        if in_force.network == "full":  # bubblewrap copies it into the box from a pipe
+            self.resolv_r, resolv_w = os.pipe()
+            self._fds.add(self.resolv_r)
+            os.write(resolv_w, netns.NAT_RESOLV_CONF.encode())
+            os.close(resolv_w)
 
     def command(self) -> list[str]:
         """bubblewrap, then a shell that reads its script (the run's) from its stdin."""
         args = ["--info-fd", str(self.info_w), "--block-fd", str(self.block_r)]
         if self.seccomp_fd is not None:
             args += ["--seccomp", str(self.seccomp_fd)]
+        if self.resolv_r is not None:
+            args += self.in_force.resolv_conf_args(self.resolv_r)
         return [
             *self.in_force.bwrap(self.socket_dir), *args,
             *self.in_force.folder_args(self.disk_mb), "--", "/bin/sh", "-c", ". /dev/stdin",
         ]  # fmt: skip
 
     def pass_fds(self) -> tuple[int, ...]:
-        fds = (self.info_w, self.block_r)
-        return fds if self.seccomp_fd is None else (*fds, self.seccomp_fd)
+        fds = (self.info_w, self.block_r, self.seccomp_fd, self.resolv_r)
+        return tuple(fd for fd in fds if fd is not None)
 
     def stdin(self) -> int:
         return self.script_r

@@ -212,6 +212,29 @@ class InForce:
                 args += ["--ro-bind", str(path), str(path)]
         return args
 
+    @staticmethod
+    def resolv_conf_args(fd: int, host_file: str = "/etc/resolv.conf") -> list[str]:
+        """A resolv.conf of the run's own, read from `fd`, where the box's /etc/resolv.conf
+        leads: the file itself, or where its links lead out of what the box shares with the
+        host (systemd-resolved's link into /run: folders the box makes, open to the run).
+        Nothing where the host has no such file."""
+        path = Path(host_file)
+        for _ in range(40):  # as the kernel's limit of links followed
+            if path.parts[1] not in ("etc", "usr", *TOPS):
+                break
+            if not path.is_symlink():
+                if not path.is_file():
+                    return []
+                return ["--perms", "0644", "--ro-bind-data", str(fd), str(path)]
+            path = Path(os.path.normpath(path.parent / os.readlink(path)))
+        else:
+            return []
+        folders = [
+            arg for parent in reversed(path.parents[:-1])
+            for arg in ("--perms", "0755", "--dir", str(parent))
+        ]  # fmt: skip
+        return [*folders, "--perms", "0644", "--ro-bind-data", str(fd), str(path)]
+
     def folder_args(self, disk_mb: int) -> list[str]:
         """The run's folder: a tmpfs of `disk_mb`, where it starts (the program comes later)."""
         home = str(self.HOME)

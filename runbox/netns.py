@@ -68,7 +68,10 @@ def bind_loopback(services: list[str]) -> list[socket.socket]:
 
 
 # slirp4netns's default network: the run is 10.0.2.100, the NAT's gateway .2, its DNS .3.
-NAT_ADDRESS, NAT_GATEWAY = "10.0.2.100/24", "10.0.2.2"
+NAT_ADDRESS, NAT_GATEWAY, NAT_DNS = "10.0.2.100/24", "10.0.2.2", "10.0.2.3"
+# A `full` run's resolv.conf: the NAT's DNS forwarder, which asks the host's resolver for it
+# (that resolver is often on a range the run may not reach: a router, 127.0.0.53).
+NAT_RESOLV_CONF = f"# robotide: the NAT forwards to the host's resolver\nnameserver {NAT_DNS}\n"
 
 
 def configure_nat(ip: str, refused: list[str]) -> None:

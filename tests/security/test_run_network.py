@@ -220,3 +220,57 @@ except OSError as e:
     thread.join(5)
     echo.close()
     assert "GOT b'bridge hello'" in log and "other refused" in log, log
+
+
+DNS_PROBE = r"""
+import socket, struct
+servers = [l.split()[1] for l in open("/etc/resolv.conf") if l.startswith("nameserver")]
+print("SERVERS", servers)
+name = b"".join(bytes([len(p)]) + p for p in b"robotide-probe.invalid".split(b"."))
+query = struct.pack(">HHHHHH", 0x5151, 0x0100, 1, 0, 0, 0) + name + b"\0" + struct.pack(">HH", 1, 1)
+s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+s.settimeout(5)
+try:
+    s.sendto(query, (servers[0], 53))
+    reply = s.recv(512)
+    print("ANSWER id", struct.unpack(">H", reply[:2])[0], "rcode", reply[3] & 15)
+except (OSError, IndexError) as e:
+    print("NO ANSWER", type(e).__name__, e)
+"""
+
+
+def test_a_full_run_looks_names_up_through_its_nat(app):
+    """The host's resolver is often on a private range (a LAN's router, a cloud's resolver,
+    systemd-resolved's 127.0.0.53), which a `full` run may not reach: its names are looked up
+    through the NAT's own DNS forwarder instead. The probe asks for a name under .invalid
+    (RFC 6761), which the host's resolver answers (NXDOMAIN) without asking anyone outside."""
+    run, log = attack(app, DNS_PROBE, robot="open")
+    assert "ANSWER id 20817" in log, log
+
+
+def test_an_allowed_lan_leaves_the_host_on_it_shut(app):
+    """A teacher opens the lab's LAN (the range of this machine's own address) to a `full`
+    robot: a server listening on all of the host's addresses stays out of reach."""
+    own = [a for a in host_addresses() if not a.startswith("127.")]
+    assert own, "this machine has no address but its loopback: nothing to probe"
+    lan = str(ipaddress.ip_network(f"{own[0]}/24", strict=False))
+    body = {"name": "lan", "url": "sim://",
+            "settings": {"network": "full", "allow_networks": [lan]}}  # fmt: skip
+    assert app.api("POST", "/api/robots", body).status_code == 201
+    wait_for(lambda: app.api("GET", "/api/robots/lan/sensors").status_code == 200)
+    everywhere = socket.create_server(("0.0.0.0", 0))
+    port = everywhere.getsockname()[1]
+    socket.create_connection((own[0], port), timeout=2).close()  # it answers the host
+    source = f"""
+import socket
+try:
+    socket.create_connection(({own[0]!r}, {port}), timeout=3)
+    print("REACHED the host")
+except OSError as e:
+    print("host refused", type(e).__name__)
+"""
+    try:
+        run, log = attack(app, source, robot="lan")
+    finally:
+        everywhere.close()
+    assert "host refused" in log and "REACHED" not in log, log
