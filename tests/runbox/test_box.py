@@ -9,6 +9,7 @@ import json
 import os
 import shutil
 import subprocess
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -18,13 +19,11 @@ NOBODY = 65534
 
 
 @pytest.fixture(scope="module")
-def readable_copy(tmp_path_factory):
-    """runbox/ and boxrun.py where an ordinary account may read them."""
-    folder = Path(tempfile_dir := tmp_path_factory.mktemp("boxcode"))
-    for parent in [folder, *folder.parents]:
-        if parent == Path("/"):
-            break
-        parent.chmod(parent.stat().st_mode | 0o005)
+def readable_copy():
+    """runbox/ and boxrun.py where an ordinary account may read them: a folder of its own in
+    /tmp (pytest's folder is 0700, and any pytest started meanwhile makes it so again)."""
+    folder = Path(tempfile.mkdtemp(prefix="robotide-boxcode-"))
+    folder.chmod(0o755)
     shutil.copytree(
         ROOT / "runbox", folder / "runbox", ignore=shutil.ignore_patterns("__pycache__")
     )
@@ -32,7 +31,8 @@ def readable_copy(tmp_path_factory):
     shutil.copy(ROOT / "tests" / "runbox" / "boxrun.py", folder / "tests" / "runbox")
     for path in folder.rglob("*"):
         path.chmod(path.stat().st_mode | 0o005)
-    return tempfile_dir
+    yield folder
+    shutil.rmtree(folder)
 
 
 def box_run(mode: str, code: Path, source: str, **spec) -> dict:
@@ -65,10 +65,10 @@ for port in (5432, 6379):
     except OSError as e:
         print("refused", port)
 print("tcp", len(open("/proc/net/tcp").read().splitlines()) - 1)
-for path in ["/root", "/var", "/work", "/tmp/boxcode0"]:
+for path in ["/root", "/var", "/work", "CODE"]:
     print("visible" if os.path.exists(path) else "hidden", path)
 """
-    result = box_run(mode, readable_copy, source)
+    result = box_run(mode, readable_copy, source.replace("CODE", str(readable_copy)))
     log = result["log"]
     assert result["state"] == "finished", log
     assert "cwd /home/robot files ['main.py']" in log
