@@ -9,13 +9,14 @@ PYTEST_PARALLEL ?= -n 2
 .PHONY: run test lint bench bench-deps fleet fleet-secrets clean
 
 $(BIN)/robotide: pyproject.toml
+	./scripts/install-run-deps.sh $(PYTHON) --quiet
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'
 	touch $@
 
 run: $(BIN)/robotide
-	./scripts/install-run-deps.sh
+	./scripts/install-run-deps.sh $(PYTHON)
 	$(BIN)/robotide up $(if $(BIND),--bind $(BIND))
 
 test: $(BIN)/robotide
