@@ -98,11 +98,13 @@ class Policy:
                 "runs are boxed with bubblewrap, which is not installed"
                 " (apt-get install bubblewrap)"
             )
-        if self.network == "full" and shutil.which("slirp4netns", path=TOOLS_PATH) is None:
-            raise IsolationUnavailable(
-                "network 'full' needs slirp4netns (apt-get install slirp4netns);"
-                " or choose network 'loopback'"
-            )
+        if self.network == "full":
+            for name, package in (("slirp4netns", "slirp4netns"), ("ip", "iproute2")):
+                if shutil.which(name, path=TOOLS_PATH) is None:
+                    raise IsolationUnavailable(
+                        f"network 'full' needs {name} (apt-get install {package});"
+                        " or choose network 'loopback'"
+                    )
         return InForce(self, clients_dir, rootless)
 
     def _resolve_rootless(self, clients_dir: Path) -> "InForce":
