@@ -421,13 +421,15 @@ class RunCgroup:
         for the run's log; keys "memory", "processes", "cpu_seconds"."""
         d, met = self.dirs, {}
         mem = d["memory"]
+        # Out of memory only: coming to the limit is not (v2's `max` event and v1's failcnt
+        # count each time the kernel took page cache back there, as for a program reading a
+        # large file, which then goes on as if it had no limit).
         if self.v2:
             events = _keyed(mem / "memory.events")
-            kills, hit = events.get("oom_kill", 0), events.get("max", 0) + events.get("oom", 0)
+            kills, hit = events.get("oom_kill", 0), events.get("oom", 0)
         else:
-            kills = _keyed(mem / "memory.oom_control").get("oom_kill", 0)
-            # failcnt: charges refused at the limit (page cache included), even without a kill.
-            hit = _read_int(mem / "memory.failcnt") + _read_int(mem / "memory.memsw.failcnt")
+            control = _keyed(mem / "memory.oom_control")
+            kills, hit = control.get("oom_kill", 0), control.get("under_oom", 0)
         if kills or hit:
             limit = f" ({self.memory_bytes // MB} MB)" if self.memory_bytes else ""
             met["memory"] = f"memory limit{limit} reached"

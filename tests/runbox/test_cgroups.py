@@ -114,6 +114,31 @@ time.sleep(30)
         p.wait(timeout=5)
 
 
+def test_reading_files_past_the_limit_is_not_meeting_it(make, tmp_path):
+    """A program that reads more data than its memory limit (a map, a recorded flight) fills
+    the page cache, which the kernel takes back at the limit: the run was never short of
+    memory, and must not be ended as if it had been (v2 counts each such reclaim as a `max`
+    event; older kernels' v1 in memory.failcnt)."""
+    data = tmp_path / "recording.bin"
+    with open(data, "wb") as f:
+        for _ in range(192):
+            f.write(os.urandom(1 << 20))
+        f.flush()
+        os.fsync(f.fileno())
+        os.posix_fadvise(f.fileno(), 0, 0, os.POSIX_FADV_DONTNEED)  # the run reads it in
+    cg = make(memory_bytes=64 * MB)
+    p = start(cg, f"""
+with open({str(data)!r}, "rb") as f:
+    while f.read(1 << 20):
+        pass
+print("read it all")
+""")  # fmt: skip
+    out, _ = p.communicate(timeout=60)
+    assert p.returncode == 0 and out == "read it all\n", (p.returncode, out)
+    assert cg.usage().memory_peak_bytes > 48 * MB  # the cache did come up to the limit
+    assert "memory" not in cg.met(), cg.met()
+
+
 def test_cpu_seconds_add_up_across_forks(make):
     cg = make(cpu_percent=None, cpu_seconds=1.5)
     # Three burners of 0.8 s each: none alone reaches 1.5 s (an rlimit never fires), the run does.
@@ -345,6 +370,20 @@ def test_fake_v2_detect_and_create(tmp_path):
     (run / "cgroup.kill").write_text("")
     assert cg.kill()
     assert (run / "cgroup.kill").read_text() == "1\n"
+
+
+def test_fake_v2_reclaim_at_the_limit_is_not_meeting_it(tmp_path):
+    """cgroup v2's memory.events counts `max` each time usage came to memory.max and the
+    kernel reclaimed (page cache a program read, say); only `oom` and `oom_kill` say the run
+    was short of memory (Documentation/admin-guide/cgroup-v2.rst)."""
+    support = detect(str(fake_v2(tmp_path)))
+    cg = RunCgroup.create("run-8", support, memory_bytes=64 * MB, pids=64)
+    events = tmp_path / "cg" / "robotide.service" / "robotide-runs" / "run-8" / "memory.events"
+    events.write_text("low 0\nhigh 0\nmax 4711\noom 0\noom_kill 0\noom_group_kill 0\n")
+    (events.parent / "pids.events").write_text("max 0\n")
+    assert cg.met() == {}
+    events.write_text("low 0\nhigh 0\nmax 4712\noom 1\noom_kill 0\noom_group_kill 0\n")
+    assert cg.met() == {"memory": "memory limit (64 MB) reached"}
 
 
 def test_fake_v2_agent_already_in_its_leaf(tmp_path):
