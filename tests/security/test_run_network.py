@@ -274,3 +274,52 @@ except OSError as e:
     finally:
         everywhere.close()
     assert "host refused" in log and "REACHED" not in log, log
+
+
+def test_a_udp_port_the_robot_names_is_relayed_to_each_socket_of_the_run(app, host_listeners):
+    """A UDP service of the host (a camera's video stream, a telemetry feed) listed in
+    loopback_ports: each socket of the run gets the answers to what it sent, and the host's
+    other UDP listener stays out of reach."""
+    service = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    service.bind(("127.0.0.1", 0))
+    port = service.getsockname()[1]
+    service.settimeout(0.2)
+    stop = threading.Event()
+
+    def answer():
+        while not stop.is_set():
+            try:
+                data, peer = service.recvfrom(100)
+                service.sendto(b"video " + data, peer)
+            except OSError:
+                pass
+
+    thread = threading.Thread(target=answer, daemon=True)
+    thread.start()
+    body = {"name": "video", "url": "sim://",
+            "settings": {"network": "loopback", "loopback_ports": [f"udp:{port}"]}}  # fmt: skip
+    assert app.api("POST", "/api/robots", body).status_code == 201
+    wait_for(lambda: app.api("GET", "/api/robots/video/sensors").status_code == 200)
+    source = f"""
+import socket
+for name in (b"one", b"two"):
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.settimeout(3)
+    s.sendto(name, ("127.0.0.1", {port}))
+    print("GOT", s.recv(100))
+other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+other.settimeout(1.5)
+try:
+    other.sendto(b"ping", ("127.0.0.1", {host_listeners["udp"]}))
+    print("REACHED the other", other.recv(100))
+except OSError as e:
+    print("other unanswered", type(e).__name__)
+"""
+    try:
+        run, log = attack(app, source, robot="video")
+    finally:
+        stop.set()
+        thread.join(5)
+        service.close()
+    assert "GOT b'video one'" in log and "GOT b'video two'" in log, log
+    assert "other unanswered" in log and "REACHED" not in log, log
