@@ -22,8 +22,10 @@ import pwd
 import re
 import shutil
 import signal
+import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -315,6 +317,62 @@ def test_a_run_reaches_neither_the_hosts_services_nor_the_servers_port(app, newc
     assert sockets and all(t == "tcp" and local == f"0100007F:{api_port:04X}"
                            for t, local, _ in sockets), log  # fmt: skip
     assert not {int(local.rsplit(":", 1)[1], 16) for _, local, _ in sockets} & set(services)
+
+
+UDP_AND_ABSTRACT = """
+import socket
+u = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+u.settimeout(2)
+try:
+    u.sendto(b"ping", ("127.0.0.1", {udp}))
+    print("UDP ANSWERED", u.recv(100))
+except OSError as e:
+    print("UDP unanswered", type(e).__name__)
+a = socket.socket(socket.AF_UNIX)
+try:
+    a.connect({abstract!r})
+    print("ABSTRACT CONNECTED")
+except OSError as e:
+    print("ABSTRACT refused", type(e).__name__)
+"""
+
+
+def test_a_run_reaches_no_udp_listener_nor_abstract_socket_of_the_host(app):
+    """A UDP echo on the host's 127.0.0.1 and an abstract Unix socket (one per network
+    namespace, whoever binds it): both answer the host, neither the rootless run."""
+    udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    udp.bind(("127.0.0.1", 0))
+    udp.settimeout(0.2)
+    abstract = socket.socket(socket.AF_UNIX)
+    abstract.bind(f"\0robotide-newcomer-{os.getpid()}")
+    abstract.listen()
+    stop = threading.Event()
+
+    def echo():
+        while not stop.is_set():
+            try:
+                data, peer = udp.recvfrom(100)
+                udp.sendto(data, peer)
+            except OSError:
+                pass
+
+    thread = threading.Thread(target=echo, daemon=True)
+    thread.start()
+    try:
+        control = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        control.settimeout(2)
+        control.sendto(b"ping", udp.getsockname())
+        assert control.recv(100) == b"ping"  # the controls: both answer the host
+        socket.socket(socket.AF_UNIX).connect(abstract.getsockname())
+        source = UDP_AND_ABSTRACT.format(udp=udp.getsockname()[1], abstract=abstract.getsockname())
+        run, log = app.run_source("probe udp and abstract", source)
+    finally:
+        stop.set()
+        thread.join(5)
+        udp.close()
+        abstract.close()
+    assert run["state"] == "finished", f"{run['reason']}: {log}"
+    assert "UDP unanswered" in log and "ABSTRACT refused" in log, log
 
 
 def test_a_run_cannot_see_the_users_own_files(app, newcomer):
