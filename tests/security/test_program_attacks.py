@@ -4,6 +4,7 @@ Each runs on a real appliance through the API like a student's program, its outc
 asserted from its log and state, and the server is checked to keep serving meanwhile.
 """
 
+import html
 import json
 import time
 
@@ -51,11 +52,18 @@ def assert_serving(app):
 
 
 def test_the_robot_page_and_admin_say_which_isolation_is_in_force(app):
+    """The box, the network and the cgroup version with its controllers (this machine
+    mounts v1), in the API, on the robot's page and in the admin's list of robots."""
+    cgroup = cgroups.detect().describe()
+    assert cgroup.startswith("cgroup v1 (memory"), cgroup
     robots = {r["name"]: r for r in app.api("GET", "/api/robots").json()}
-    assert "sandbox (bubblewrap)" in robots["jail"]["isolation"]
-    assert "network none" in robots["jail"]["isolation"]
-    page = app.session().get("/robots/jail/").text
-    assert "sandbox (bubblewrap)" in page
+    isolation = robots["jail"]["isolation"]
+    assert "sandbox (bubblewrap)" in isolation and "network none" in isolation, isolation
+    assert cgroup in isolation, isolation
+    client = app.session()
+    for url in ("/robots/jail/", "/admin/robots/robot/"):
+        page = html.unescape(client.get(url).text)
+        assert "sandbox (bubblewrap)" in page and cgroup in page, url
 
 
 def test_it_cannot_read_the_database_or_the_secret_key(app):
