@@ -244,6 +244,27 @@ class Box:
         self._close(*self._fds)
         self.init_fd = None  # closed with the rest: its number may be anyone's now
 
+    async def _start_nat(self, *options: str) -> None:
+        """slirp4netns for the run's network namespace (its tap0 made, not yet set up)."""
+        ready_r, ready_w = os.pipe()
+        try:
+            self.nat = await asyncio.create_subprocess_exec(
+                tool("slirp4netns"), "--mtu=65520", "--disable-host-loopback", *options,
+                "--ready-fd", str(ready_w), str(self.init_pid), "tap0",
+                pass_fds=(ready_w,), stdin=asyncio.subprocess.DEVNULL,
+                stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL,
+            )  # fmt: skip
+            os.close(ready_w)
+            ready_w = None
+            reading = asyncio.to_thread(os.read, ready_r, 1)
+            ready = await asyncio.wait_for(reading, NAT_READY_TIMEOUT)
+            if not ready:
+                raise BoxFailed("slirp4netns could not set up the run's network")
+        finally:
+            os.close(ready_r)
+            if ready_w is not None:
+                os.close(ready_w)
+
     def _init_alive(self) -> bool:
         """Whether the run's pid namespace may still hold processes: its first process ends
         last (the kernel ends and reaps the others first), so once it has ended none are
@@ -370,24 +391,7 @@ class BwrapBox(Box):
         loopback; then routes that refuse the private ranges the robot does not allow.
         The tap device is set up here, not by slirp4netns (whose set-up of the loopback
         would clash with bubblewrap's)."""
-        ready_r, ready_w = os.pipe()
-        try:
-            self.nat = await asyncio.create_subprocess_exec(
-                tool("slirp4netns"), "--mtu=65520", "--disable-host-loopback",
-                "--ready-fd", str(ready_w), str(self.init_pid), "tap0",
-                pass_fds=(ready_w,), stdin=asyncio.subprocess.DEVNULL,
-                stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL,
-            )  # fmt: skip
-            os.close(ready_w)
-            ready_w = None
-            reading = asyncio.to_thread(os.read, ready_r, 1)
-            ready = await asyncio.wait_for(reading, NAT_READY_TIMEOUT)
-            if not ready:
-                raise BoxFailed("slirp4netns could not set up the run's network")
-        finally:
-            os.close(ready_r)
-            if ready_w is not None:
-                os.close(ready_w)
+        await self._start_nat()
         ranges = blocked_ranges(self.in_force.policy.allow_networks, host_addresses())
         await asyncio.wrap_future(
             netns.in_namespace(self.init_pid, lambda: netns.configure_nat(tool("ip"), ranges))
@@ -424,9 +428,23 @@ class RootlessBox(Box):
             self.pidns = os.stat(f"/proc/{self.init_pid}/ns/pid").st_ino
             await self._enter_cgroup(wait_for_cgroup)
             await self._serve(sockets)
+            if self.in_force.network == "full":
+                await self._open_nat()
         except BaseException:
             self.control.close()
             raise
+
+    async def _open_nat(self) -> None:
+        """slirp4netns, as the agent's own account, enters the run's user namespace (the
+        agent made it: its owner may) to make the tap device; `ip` is run there the same way
+        (nsenter) to set it up and refuse the private ranges. The run's resolv.conf came
+        with the box's spec (InForce.inbox_spec)."""
+        userns = f"/proc/{self.init_pid}/ns/user"
+        await self._start_nat(f"--userns-path={userns}")
+        ranges = blocked_ranges(self.in_force.policy.allow_networks, host_addresses())
+        enter = [tool("nsenter"), f"--target={self.init_pid}", "--user", "--net",
+                 "--preserve-credentials", "--"]  # fmt: skip
+        await asyncio.to_thread(netns.configure_nat, tool("ip"), ranges, enter)
 
     async def go(self, launch: Launch, gate=None) -> None:
         try:

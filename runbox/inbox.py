@@ -102,6 +102,8 @@ def build_root(spec: dict) -> None:
     for name, target in (("fd", "/proc/self/fd"), ("stdin", "/proc/self/fd/0"),
                          ("stdout", "/proc/self/fd/1"), ("stderr", "/proc/self/fd/2")):  # fmt: skip
         os.symlink(target, f"{ROOT}/dev/{name}")
+    if spec.get("resolv_conf"):
+        own_resolv_conf(spec["resolv_conf"])
     tmpfs(ROOT + "/dev/shm", spec["tmp_mb"], "1777")
     tmpfs(ROOT + "/tmp", spec["tmp_mb"], "1777")
     tmpfs(ROOT + spec["home"], spec["disk_mb"], "1777")
@@ -114,6 +116,25 @@ def build_root(spec: dict) -> None:
     check(libc.umount2(b"/.old", MNT_DETACH), "umount the old root")
     os.rmdir("/.old")
     mount("none", "/", None, MS_REMOUNT | MS_BIND | MS_RDONLY | MS_NOSUID | MS_NODEV)
+
+
+def own_resolv_conf(resolv: dict) -> None:
+    """A `full` run's resolv.conf (the NAT's DNS forwarder), where the box's /etc/resolv.conf
+    leads (runbox.isolation.resolv_conf_place): over the host's file, or in folders made."""
+    for folder in resolv["folders"]:
+        os.makedirs(ROOT + folder, exist_ok=True)
+        os.chmod(ROOT + folder, 0o755)  # whatever the agent's umask
+    target = ROOT + resolv["path"]
+    staged = ROOT + "/.resolv.conf"
+    with open(os.open(staged, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644), "w") as file:
+        file.write(resolv["text"])
+    os.chmod(staged, 0o644)
+    if not os.path.exists(target):  # in a folder of the box's own
+        os.rename(staged, target)
+        return
+    mount(staged, target, None, MS_BIND)
+    mount(staged, target, None, MS_REMOUNT | MS_BIND | MS_RDONLY | MS_NOSUID | MS_NODEV)
+    os.unlink(staged)
 
 
 def loopback_up() -> None:

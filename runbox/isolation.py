@@ -31,6 +31,7 @@ from functools import cache
 from pathlib import Path
 
 from runbox import SYSTEM_PATH, seccomp
+from runbox.netns import NAT_RESOLV_CONF
 
 ISOLATIONS = ("auto", "sandbox")
 NETWORKS = ("none", "loopback", "full")
@@ -43,6 +44,7 @@ INBOX = Path(__file__).resolve().parent / "inbox.py"
 SYSTEM_PYTHON = "/usr/bin/python3"  # runs the rootless box's first process
 # The server's tools may live in sbin; programs' PATH (SYSTEM_PATH) has no need of it.
 TOOLS_PATH = f"/usr/local/sbin:/usr/sbin:/sbin:{SYSTEM_PATH}"
+TUN = "/dev/net/tun"  # slirp4netns's tap device, opened by an agent that is not root
 
 
 class IsolationUnavailable(RuntimeError):
@@ -109,10 +111,18 @@ class Policy:
 
     def _resolve_rootless(self, clients_dir: Path) -> "InForce":
         if self.network == "full":
-            raise IsolationUnavailable(
-                "network 'full' needs robotide to run as root (its NAT is set up from"
-                " outside the run); choose network 'loopback' or 'none'"
-            )
+            for name, package in (("slirp4netns", "slirp4netns"), ("ip", "iproute2"),
+                                  ("nsenter", "util-linux")):  # fmt: skip
+                if shutil.which(name, path=TOOLS_PATH) is None:
+                    raise IsolationUnavailable(
+                        f"network 'full' needs {name} (apt-get install {package});"
+                        " or choose network 'loopback'"
+                    )
+            if not os.access(TUN, os.R_OK | os.W_OK):
+                raise IsolationUnavailable(
+                    f"network 'full' as an ordinary user needs {TUN} open to it (Debian's"
+                    " default: mode 0666); or run robotide as root, or choose 'loopback'"
+                )
         if not os.path.exists(SYSTEM_PYTHON) or shutil.which("unshare", path=TOOLS_PATH) is None:
             raise IsolationUnavailable(f"rootless runs need {SYSTEM_PYTHON} and util-linux")
         if not user_namespaces_allowed():
@@ -182,7 +192,12 @@ class InForce:
 
     def inbox_spec(self, socket_dir: Path, disk_mb: int) -> dict:
         readonly = ["/usr", "/etc", *(f"/{top}" for top in TOPS)]
+        place = resolv_conf_place() if self.network == "full" else None
+        resolv = None
+        if place is not None:
+            resolv = {"folders": place[0], "path": place[1], "text": NAT_RESOLV_CONF}
         return {
+            "resolv_conf": resolv,
             "readonly": readonly, "clients": str(self.clients_dir),
             "clients_at": str(self.CLIENTS), "api_dir": str(socket_dir),
             "api_at": str(self.API_DIR), "home": str(self.HOME),
@@ -215,27 +230,14 @@ class InForce:
         return args
 
     @staticmethod
-    def resolv_conf_args(fd: int, host_file: str = "/etc/resolv.conf") -> list[str]:
-        """A resolv.conf of the run's own, read from `fd`, where the box's /etc/resolv.conf
-        leads: the file itself, or where its links lead out of what the box shares with the
-        host (systemd-resolved's link into /run: folders the box makes, open to the run).
-        Nothing where the host has no such file."""
-        path = Path(host_file)
-        for _ in range(40):  # as the kernel's limit of links followed
-            if path.parts[1] not in ("etc", "usr", *TOPS):
-                break
-            if not path.is_symlink():
-                if not path.is_file():
-                    return []
-                return ["--perms", "0644", "--ro-bind-data", str(fd), str(path)]
-            path = Path(os.path.normpath(path.parent / os.readlink(path)))
-        else:
+    def resolv_conf_args(fd: int) -> list[str]:
+        """bubblewrap's arguments for the run's resolv.conf, read from `fd`."""
+        place = resolv_conf_place()
+        if place is None:
             return []
-        folders = [
-            arg for parent in reversed(path.parents[:-1])
-            for arg in ("--perms", "0755", "--dir", str(parent))
-        ]  # fmt: skip
-        return [*folders, "--perms", "0644", "--ro-bind-data", str(fd), str(path)]
+        folders, path = place
+        made = [arg for folder in folders for arg in ("--perms", "0755", "--dir", folder)]
+        return [*made, "--perms", "0644", "--ro-bind-data", str(fd), path]
 
     def folder_args(self, disk_mb: int) -> list[str]:
         """The run's folder: a tmpfs of `disk_mb`, where it starts (the program comes later)."""
@@ -251,6 +253,21 @@ def run_uid(run_id: int, instance: str) -> int:
     one data folder); another robotide on the same machine gets another slice of the range."""
     slot = zlib.crc32(instance.encode()) % SLOTS
     return UID_BASE + slot * RUNS_PER_SLOT + run_id % RUNS_PER_SLOT
+
+
+def resolv_conf_place(host_file: str = "/etc/resolv.conf") -> tuple[list[str], str] | None:
+    """Where a box's own resolv.conf goes: the box's /etc/resolv.conf itself, or where its
+    links lead out of what the box shares with the host (systemd-resolved's link into /run:
+    then the folders to make there, open to the run). None where the host has none."""
+    path = Path(host_file)
+    for _ in range(40):  # as the kernel's limit of links followed
+        if path.parts[1] not in ("etc", "usr", *TOPS):
+            folders = [str(parent) for parent in reversed(path.parents[:-1])]
+            return folders, str(path)
+        if not path.is_symlink():
+            return ([], str(path)) if path.is_file() else None
+        path = Path(os.path.normpath(path.parent / os.readlink(path)))
+    return None
 
 
 def tool(name: str) -> str:

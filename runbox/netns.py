@@ -74,15 +74,15 @@ NAT_ADDRESS, NAT_GATEWAY, NAT_DNS = "10.0.2.100/24", "10.0.2.2", "10.0.2.3"
 NAT_RESOLV_CONF = f"# robotide: the NAT forwards to the host's resolver\nnameserver {NAT_DNS}\n"
 
 
-def configure_nat(ip: str, refused: list[str]) -> None:
-    """In the current namespace: slirp4netns's tap0 up as the way out, and routes that
-    refuse the given ranges (EACCES on connect)."""
+def configure_nat(ip: str, refused: list[str], enter: list[str] = ()) -> None:
+    """In the current namespace (or the one `enter` runs `ip` in): slirp4netns's tap0 up
+    as the way out, and routes that refuse the given ranges (EACCES on connect)."""
     batch = (
         f"link set tap0 mtu 65520 up\naddr add {NAT_ADDRESS} dev tap0\n"
         f"route add default via {NAT_GATEWAY} dev tap0\n"
     ) + "".join(f"route add prohibit {net}\n" for net in refused)
     done = subprocess.run(
-        [ip, "-batch", "-"], input=batch, text=True, capture_output=True, timeout=10
+        [*enter, ip, "-batch", "-"], input=batch, text=True, capture_output=True, timeout=10
     )
     if done.returncode != 0:
         raise OSError(f"ip route: {done.stderr.strip()}")

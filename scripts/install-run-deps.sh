@@ -37,6 +37,7 @@ fi
 cat >&2 <<MSG
 robotide runs as $(id -un), not root: programs run in a rootless box (user namespaces, from
 util-linux and python3), with per-process limits instead of a cgroup unless your session
-delegates one, and without network 'full'. The robot's page says what is in force. For more,
-run 'make run' as root${need:+ (it installs:$need)}.
+delegates one; network 'full' needs slirp4netns and /dev/net/tun open to you (Debian's
+default). The robot's page says what is in force. For more, run 'make run' as root${need:+
+(it installs:$need)}.
 MSG

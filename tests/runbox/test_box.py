@@ -227,3 +227,57 @@ with lock:
     result = box_run(mode, readable_copy, source)
     assert result["state"] == "finished", result["log"]
     assert "lock ok 0o1777" in result["log"]
+
+
+FULL_PROBE = r"""
+import socket, struct
+servers = [l.split()[1] for l in open("/etc/resolv.conf") if l.startswith("nameserver")]
+print("SERVERS", servers)
+name = b"".join(bytes([len(p)]) + p for p in b"robotide-probe.invalid".split(b"."))
+query = struct.pack(">HHHHHH", 0x5151, 0x0100, 1, 0, 0, 0) + name + b"\0" + struct.pack(">HH", 1, 1)
+s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+s.settimeout(5)
+try:
+    s.sendto(query, (servers[0], 53))
+    print("DNS answered", struct.unpack(">H", s.recv(512)[:2])[0])
+except OSError as e:
+    print("DNS unanswered", type(e).__name__)
+routes = [line.split() for line in open("/proc/net/route").read().splitlines()[1:]]
+print("DEFAULT", [r[0] for r in routes if r[1] == "00000000" and r[7] == "00000000"])
+print("REFUSED", sorted(r[1] for r in routes if int(r[3], 16) & 0x0200))
+for host in ("10.0.2.2", "127.0.0.1"):
+    try:
+        socket.create_connection((host, 5432), timeout=2).close()
+        print("REACHED", host)
+    except OSError as e:
+        print("refused", host, type(e).__name__)
+"""
+
+
+@pytest.fixture
+def tun_as_debian_has_it():
+    """slirp4netns, run by an agent that is not root, opens /dev/net/tun: Debian's udev
+    makes it 0666 (50-udev-default.rules); this machine's is 0600. Restored after."""
+    tun = Path("/dev/net/tun")
+    mode = tun.stat().st_mode & 0o777
+    tun.chmod(0o666)
+    yield
+    tun.chmod(mode)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_full_run_has_the_internet_through_its_nat_and_nothing_of_the_host(
+    mode, readable_copy, tun_as_debian_has_it
+):
+    """Network `full`, as root and rootless: names are looked up through the NAT's DNS
+    forwarder, the way out is the run's own tap device, the private ranges are refused, and
+    the host's loopback is reached neither behind the NAT's gateway nor on 127.0.0.1."""
+    socket_to_host = subprocess.run(["pg_isready", "-h", "127.0.0.1"], capture_output=True)
+    assert socket_to_host.returncode == 0, "PostgreSQL must answer the host for the control"
+    result = box_run(mode, readable_copy, FULL_PROBE, network="full")
+    log = result["log"]
+    assert result["state"] == "finished", log
+    assert "SERVERS ['10.0.2.3']" in log and "DNS answered 20817" in log, log
+    assert "DEFAULT ['tap0']" in log, log
+    assert "'0000000A'" in log.split("REFUSED", 1)[1].splitlines()[0], log  # 10.0.0.0/8
+    assert "REACHED" not in log and log.count("refused") == 2, log
