@@ -13,8 +13,9 @@ The network a robot's settings choose (``network``):
     loopback  127.0.0.1 inside the run's own namespace, offering what its robot gives
               programs (the Robot API over TCP, a MAVLink robot's programs endpoint, ports
               the robot names in ``loopback_ports``) through sockets the agent owns
-    full      that, and the internet through a user-mode NAT (slirp4netns), without the
-              host's loopback and private ranges unless ``allow_networks`` lists some
+    full      that, and the internet through a user-mode NAT (slirp4netns, whose DNS
+              forwarder is the run's resolver), without the private ranges unless
+              ``allow_networks`` lists some, and never the host's loopback or addresses
 
 bwrap reports the sandbox's first process on ``--info-fd`` and waits on ``--block-fd``
 before it runs anything of the program's, so the agent can put the run in its cgroup and

@@ -93,3 +93,13 @@ def pytest_xdist_make_scheduler(config, log):
 
 def in_ci() -> bool:
     return os.environ.get("CI", "").lower() in ("1", "true", "yes")
+
+
+@pytest.fixture
+def tun_as_debian_has_it():
+    """slirp4netns, run by an agent that is not root, opens /dev/net/tun: Debian's udev
+    makes it 0666 (50-udev-default.rules), this machine's came 0600. Made as Debian has it,
+    and left so: another test process may be using it meanwhile."""
+    tun = Path("/dev/net/tun")
+    if tun.stat().st_mode & 0o666 != 0o666:
+        tun.chmod(0o666)

@@ -152,8 +152,8 @@ class UserAppliance:
         headers = {"Authorization": f"Bearer {self.token}"}
         return httpx.request(method, self.url + path, json=body, headers=headers, timeout=10)
 
-    def run(self, program_id: int, timeout: float = 60) -> tuple[dict, str]:
-        started = self.api("POST", f"/api/programs/{program_id}/run", {"robot": "sim"})
+    def run(self, program_id: int, timeout: float = 60, robot="sim") -> tuple[dict, str]:
+        started = self.api("POST", f"/api/programs/{program_id}/run", {"robot": robot})
         assert started.status_code == 201, started.text
         run_id = started.json()["id"]
 
@@ -164,11 +164,11 @@ class UserAppliance:
         run = wait_for(ended, timeout=timeout, interval=0.2, what=f"run {run_id} to end")
         return run, self.api("GET", f"/api/runs/{run_id}/log").text
 
-    def run_source(self, name: str, source: str) -> tuple[dict, str]:
+    def run_source(self, name: str, source: str, robot="sim") -> tuple[dict, str]:
         body = {"name": name, "language": "python", "source": source}
         created = self.api("POST", "/api/programs", body)
         assert created.status_code == 201, created.text
-        return self.run(created.json()["id"])
+        return self.run(created.json()["id"], robot=robot)
 
     def logs(self) -> str:
         return self.log_path.read_text() if self.log_path.exists() else ""
@@ -319,6 +319,31 @@ def test_a_run_reaches_neither_the_hosts_services_nor_the_servers_port(app, newc
     assert not {int(local.rsplit(":", 1)[1], 16) for _, local, _ in sockets} & set(services)
 
 
+FULL_PROBE = """
+import socket, struct
+servers = [l.split()[1] for l in open("/etc/resolv.conf") if l.startswith("nameserver")]
+print("SERVERS", servers)
+name = b"".join(bytes([len(p)]) + p for p in b"robotide-probe.invalid".split(b"."))
+query = struct.pack(">6H", 0x5151, 0x0100, 1, 0, 0, 0) + name + bytes(1) + struct.pack(">2H", 1, 1)
+s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+s.settimeout(5)
+try:
+    s.sendto(query, (servers[0], 53))
+    print("DNS answered", len(s.recv(512)))
+except OSError as e:
+    print("DNS unanswered", type(e).__name__)
+routes = [line.split() for line in open("/proc/net/route").read().splitlines()[1:]]
+print("DEFAULT", [r[0] for r in routes if r[1] == "00000000" and r[7] == "00000000"])
+for port in {ports!r}:
+    for host in ("127.0.0.1", "10.0.2.2"):
+        try:
+            socket.create_connection((host, port), timeout=2).close()
+            print("CONNECTED", host, port)
+        except OSError as e:
+            print("REFUSED", host, port, type(e).__name__)
+"""
+
+
 UDP_AND_ABSTRACT = """
 import socket
 u = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -373,6 +398,23 @@ def test_a_run_reaches_no_udp_listener_nor_abstract_socket_of_the_host(app):
         abstract.close()
     assert run["state"] == "finished", f"{run['reason']}: {log}"
     assert "UDP unanswered" in log and "ABSTRACT refused" in log, log
+
+
+def test_a_full_run_of_the_ordinary_user_has_the_nat_and_nothing_of_the_host(
+    app, tun_as_debian_has_it
+):
+    """A robot with network `full` in the ordinary user's appliance: its run looks names up
+    through the NAT, goes out through its own tap device, and reaches neither the host's
+    loopback behind the NAT's gateway nor the host's services."""
+    body = {"name": "open", "url": "sim://", "settings": {"network": "full"}}
+    assert app.api("POST", "/api/robots", body).status_code == 201
+    wait_for(lambda: app.api("GET", "/api/robots/open/sensors").status_code == 200)
+    services = [5432, 6379, app.port]
+    run, log = app.run_source("probe full", FULL_PROBE.format(ports=services), robot="open")
+    assert run["state"] == "finished", f"{run['reason']}: {log}"
+    assert "SERVERS ['10.0.2.3']" in log and "DNS answered" in log, log
+    assert "DEFAULT ['tap0']" in log, log
+    assert "CONNECTED" not in log and log.count("REFUSED") == 2 * len(services), log
 
 
 def test_a_run_cannot_see_the_users_own_files(app, newcomer):

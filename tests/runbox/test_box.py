@@ -254,17 +254,6 @@ for host in ("10.0.2.2", "127.0.0.1"):
 """
 
 
-@pytest.fixture
-def tun_as_debian_has_it():
-    """slirp4netns, run by an agent that is not root, opens /dev/net/tun: Debian's udev
-    makes it 0666 (50-udev-default.rules); this machine's is 0600. Restored after."""
-    tun = Path("/dev/net/tun")
-    mode = tun.stat().st_mode & 0o777
-    tun.chmod(0o666)
-    yield
-    tun.chmod(mode)
-
-
 @pytest.mark.parametrize("mode", MODES)
 def test_a_full_run_has_the_internet_through_its_nat_and_nothing_of_the_host(
     mode, readable_copy, tun_as_debian_has_it
