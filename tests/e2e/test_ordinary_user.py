@@ -25,7 +25,6 @@ import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -34,6 +33,7 @@ import pytest
 
 from tests.appliance import free_port, wait_for
 from tests.conftest import in_ci
+from tests.net_probes import DNS_ANSWERED, DNS_PROBE, udp_service
 
 REPO = Path(__file__).resolve().parents[2]  # the repository this file lives in
 ACCOUNT = "robotide-newcomer"
@@ -319,19 +319,9 @@ def test_a_run_reaches_neither_the_hosts_services_nor_the_servers_port(app, newc
     assert not {int(local.rsplit(":", 1)[1], 16) for _, local, _ in sockets} & set(services)
 
 
-FULL_PROBE = """
-import socket, struct
-servers = [l.split()[1] for l in open("/etc/resolv.conf") if l.startswith("nameserver")]
-print("SERVERS", servers)
-name = b"".join(bytes([len(p)]) + p for p in b"robotide-probe.invalid".split(b"."))
-query = struct.pack(">6H", 0x5151, 0x0100, 1, 0, 0, 0) + name + bytes(1) + struct.pack(">2H", 1, 1)
-s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-s.settimeout(5)
-try:
-    s.sendto(query, (servers[0], 53))
-    print("DNS answered", len(s.recv(512)))
-except OSError as e:
-    print("DNS unanswered", type(e).__name__)
+FULL_PROBE = (
+    DNS_PROBE
+    + """
 routes = [line.split() for line in open("/proc/net/route").read().splitlines()[1:]]
 print("DEFAULT", [r[0] for r in routes if r[1] == "00000000" and r[7] == "00000000"])
 for port in {ports!r}:
@@ -342,6 +332,7 @@ for port in {ports!r}:
         except OSError as e:
             print("REFUSED", host, port, type(e).__name__)
 """
+)
 
 
 UDP_AND_ABSTRACT = """
@@ -365,37 +356,17 @@ except OSError as e:
 def test_a_run_reaches_no_udp_listener_nor_abstract_socket_of_the_host(app):
     """A UDP echo on the host's 127.0.0.1 and an abstract Unix socket (one per network
     namespace, whoever binds it): both answer the host, neither the rootless run."""
-    udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    udp.bind(("127.0.0.1", 0))
-    udp.settimeout(0.2)
     abstract = socket.socket(socket.AF_UNIX)
     abstract.bind(f"\0robotide-newcomer-{os.getpid()}")
     abstract.listen()
-    stop = threading.Event()
-
-    def echo():
-        while not stop.is_set():
-            try:
-                data, peer = udp.recvfrom(100)
-                udp.sendto(data, peer)
-            except OSError:
-                pass
-
-    thread = threading.Thread(target=echo, daemon=True)
-    thread.start()
-    try:
+    with udp_service() as udp, abstract:
         control = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         control.settimeout(2)
-        control.sendto(b"ping", udp.getsockname())
+        control.sendto(b"ping", udp)
         assert control.recv(100) == b"ping"  # the controls: both answer the host
         socket.socket(socket.AF_UNIX).connect(abstract.getsockname())
-        source = UDP_AND_ABSTRACT.format(udp=udp.getsockname()[1], abstract=abstract.getsockname())
+        source = UDP_AND_ABSTRACT.format(udp=udp[1], abstract=abstract.getsockname())
         run, log = app.run_source("probe udp and abstract", source)
-    finally:
-        stop.set()
-        thread.join(5)
-        udp.close()
-        abstract.close()
     assert run["state"] == "finished", f"{run['reason']}: {log}"
     assert "UDP unanswered" in log and "ABSTRACT refused" in log, log
 
@@ -412,7 +383,7 @@ def test_a_full_run_of_the_ordinary_user_has_the_nat_and_nothing_of_the_host(
     services = [5432, 6379, app.port]
     run, log = app.run_source("probe full", FULL_PROBE.format(ports=services), robot="open")
     assert run["state"] == "finished", f"{run['reason']}: {log}"
-    assert "SERVERS ['10.0.2.3']" in log and "DNS answered" in log, log
+    assert "SERVERS ['10.0.2.3']" in log and DNS_ANSWERED in log, log
     assert "DEFAULT ['tap0']" in log, log
     assert "CONNECTED" not in log and log.count("REFUSED") == 2 * len(services), log
 

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.net_probes import DNS_ANSWERED, DNS_PROBE
+
 ROOT = Path(__file__).resolve().parents[2]
 NOBODY = 65534
 
@@ -229,19 +231,9 @@ with lock:
     assert "lock ok 0o1777" in result["log"]
 
 
-FULL_PROBE = r"""
-import socket, struct
-servers = [l.split()[1] for l in open("/etc/resolv.conf") if l.startswith("nameserver")]
-print("SERVERS", servers)
-name = b"".join(bytes([len(p)]) + p for p in b"robotide-probe.invalid".split(b"."))
-query = struct.pack(">HHHHHH", 0x5151, 0x0100, 1, 0, 0, 0) + name + b"\0" + struct.pack(">HH", 1, 1)
-s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-s.settimeout(5)
-try:
-    s.sendto(query, (servers[0], 53))
-    print("DNS answered", struct.unpack(">H", s.recv(512)[:2])[0])
-except OSError as e:
-    print("DNS unanswered", type(e).__name__)
+FULL_PROBE = (
+    DNS_PROBE
+    + r"""
 routes = [line.split() for line in open("/proc/net/route").read().splitlines()[1:]]
 print("DEFAULT", [r[0] for r in routes if r[1] == "00000000" and r[7] == "00000000"])
 print("REFUSED", sorted(r[1] for r in routes if int(r[3], 16) & 0x0200))
@@ -252,6 +244,7 @@ for host in ("10.0.2.2", "127.0.0.1"):
     except OSError as e:
         print("refused", host, type(e).__name__)
 """
+)
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -266,7 +259,7 @@ def test_a_full_run_has_the_internet_through_its_nat_and_nothing_of_the_host(
     result = box_run(mode, readable_copy, FULL_PROBE, network="full")
     log = result["log"]
     assert result["state"] == "finished", log
-    assert "SERVERS ['10.0.2.3']" in log and "DNS answered 20817" in log, log
+    assert "SERVERS ['10.0.2.3']" in log and DNS_ANSWERED in log, log
     assert "DEFAULT ['tap0']" in log, log
     assert "'0000000A'" in log.split("REFUSED", 1)[1].splitlines()[0], log  # 10.0.0.0/8
     assert "REACHED" not in log and log.count("refused") == 2, log

@@ -17,6 +17,7 @@ import pytest
 
 from runbox.netspec import host_addresses
 from tests.appliance import Appliance, wait_for
+from tests.net_probes import DNS_ANSWERED, DNS_PROBE, udp_service
 from tests.security.test_program_attacks import attack
 
 PROBE = """
@@ -68,29 +69,13 @@ def app(tmp_path_factory):
 def host_listeners():
     """A TCP listener, a UDP echo and an abstract socket on the host, each answering."""
     tcp = socket.create_server(("127.0.0.1", 0))
-    udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    udp.bind(("127.0.0.1", 0))
     abstract = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     name = f"\0robotide-test-{os.getpid()}"
     abstract.bind(name)
     abstract.listen()
-    stop = threading.Event()
-
-    def echo():
-        udp.settimeout(0.2)
-        while not stop.is_set():
-            try:
-                data, peer = udp.recvfrom(100)
-                udp.sendto(b"pong", peer)
-            except OSError:
-                pass
-
-    thread = threading.Thread(target=echo, daemon=True)
-    thread.start()
-    yield {"tcp": tcp.getsockname()[1], "udp": udp.getsockname()[1], "abstract": name}
-    stop.set()
-    thread.join()
-    for sock in (tcp, udp, abstract):
+    with udp_service(b"pong") as udp:
+        yield {"tcp": tcp.getsockname()[1], "udp": udp[1], "abstract": name}
+    for sock in (tcp, abstract):
         sock.close()
 
 
@@ -222,30 +207,13 @@ except OSError as e:
     assert "GOT b'bridge hello'" in log and "other refused" in log, log
 
 
-DNS_PROBE = r"""
-import socket, struct
-servers = [l.split()[1] for l in open("/etc/resolv.conf") if l.startswith("nameserver")]
-print("SERVERS", servers)
-name = b"".join(bytes([len(p)]) + p for p in b"robotide-probe.invalid".split(b"."))
-query = struct.pack(">HHHHHH", 0x5151, 0x0100, 1, 0, 0, 0) + name + b"\0" + struct.pack(">HH", 1, 1)
-s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-s.settimeout(5)
-try:
-    s.sendto(query, (servers[0], 53))
-    reply = s.recv(512)
-    print("ANSWER id", struct.unpack(">H", reply[:2])[0], "rcode", reply[3] & 15)
-except (OSError, IndexError) as e:
-    print("NO ANSWER", type(e).__name__, e)
-"""
-
-
 def test_a_full_run_looks_names_up_through_its_nat(app):
     """The host's resolver is often on a private range (a LAN's router, a cloud's resolver,
     systemd-resolved's 127.0.0.53), which a `full` run may not reach: its names are looked up
     through the NAT's own DNS forwarder instead. The probe asks for a name under .invalid
     (RFC 6761), which the host's resolver answers (NXDOMAIN) without asking anyone outside."""
     run, log = attack(app, DNS_PROBE, robot="open")
-    assert "ANSWER id 20817" in log, log
+    assert "SERVERS ['10.0.2.3']" in log and DNS_ANSWERED in log, log
 
 
 def test_an_allowed_lan_leaves_the_host_on_it_shut(app):
@@ -280,22 +248,14 @@ def test_a_udp_port_the_robot_names_is_relayed_to_each_socket_of_the_run(app, ho
     """A UDP service of the host (a camera's video stream, a telemetry feed) listed in
     loopback_ports: each socket of the run gets the answers to what it sent, and the host's
     other UDP listener stays out of reach."""
-    service = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    service.bind(("127.0.0.1", 0))
-    port = service.getsockname()[1]
-    service.settimeout(0.2)
-    stop = threading.Event()
+    with udp_service(b"video ") as (_, port):
+        run, log = relayed_udp(app, port, host_listeners["udp"])
+    assert "GOT b'video one'" in log and "GOT b'video two'" in log, log
+    assert "other unanswered" in log and "REACHED" not in log, log
 
-    def answer():
-        while not stop.is_set():
-            try:
-                data, peer = service.recvfrom(100)
-                service.sendto(b"video " + data, peer)
-            except OSError:
-                pass
 
-    thread = threading.Thread(target=answer, daemon=True)
-    thread.start()
+def relayed_udp(app, port: int, other: int):
+    """A run on a new robot that relays `port`: two sockets to it, one to `other`."""
     body = {"name": "video", "url": "sim://",
             "settings": {"network": "loopback", "loopback_ports": [f"udp:{port}"]}}  # fmt: skip
     assert app.api("POST", "/api/robots", body).status_code == 201
@@ -310,16 +270,9 @@ for name in (b"one", b"two"):
 other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
 other.settimeout(1.5)
 try:
-    other.sendto(b"ping", ("127.0.0.1", {host_listeners["udp"]}))
+    other.sendto(b"ping", ("127.0.0.1", {other}))
     print("REACHED the other", other.recv(100))
 except OSError as e:
     print("other unanswered", type(e).__name__)
 """
-    try:
-        run, log = attack(app, source, robot="video")
-    finally:
-        stop.set()
-        thread.join(5)
-        service.close()
-    assert "GOT b'video one'" in log and "GOT b'video two'" in log, log
-    assert "other unanswered" in log and "REACHED" not in log, log
+    return attack(app, source, robot="video")
