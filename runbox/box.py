@@ -245,11 +245,14 @@ class Box:
         self.init_fd = None  # closed with the rest: its number may be anyone's now
 
     async def _start_nat(self, *options: str) -> None:
-        """slirp4netns for the run's network namespace (its tap0 made, not yet set up)."""
+        """slirp4netns for the run's network namespace (its tap0 made, not yet set up). It
+        parses every packet the run sends (libslirp): sandboxed (a mount namespace of its
+        own, no capability but binding low ports) and under its own seccomp filter."""
         ready_r, ready_w = os.pipe()
         try:
             self.nat = await asyncio.create_subprocess_exec(
-                tool("slirp4netns"), "--mtu=65520", "--disable-host-loopback", *options,
+                tool("slirp4netns"), "--mtu=65520", "--disable-host-loopback",
+                "--enable-sandbox", "--enable-seccomp", *options,
                 "--ready-fd", str(ready_w), str(self.init_pid), "tap0",
                 pass_fds=(ready_w,), stdin=asyncio.subprocess.DEVNULL,
                 stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL,

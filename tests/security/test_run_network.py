@@ -276,3 +276,35 @@ except OSError as e:
     print("other unanswered", type(e).__name__)
 """
     return attack(app, source, robot="video")
+
+
+def test_the_nat_of_a_full_run_holds_no_power_over_the_host(app):
+    """slirp4netns parses every packet a student's program sends, with libslirp: as the
+    agent's child it would do so as root. It runs sandboxed (its own mount namespace, every
+    capability dropped but binding low ports) and under its seccomp filter."""
+    program = app.create_program("waits", "import time\nprint('up', flush=True)\ntime.sleep(4)\n")
+    run_id = app.run_program(program["id"], robot="open")["id"]
+    wait_for(lambda: app.api("GET", f"/api/runs/{run_id}").json()["state"] == "running")
+    nats = wait_for(lambda: nat_processes_of(app.server.pid), what="the run's slirp4netns")
+    for pid in nats:
+        status = dict(
+            line.split(":\t", 1) for line in open(f"/proc/{pid}/status").read().splitlines()
+        )
+        assert int(status["CapEff"], 16) & ~(1 << 10) == 0, status["CapEff"]  # NET_BIND_SERVICE
+        assert status["Seccomp"].strip() == "2", status["Seccomp"]
+        assert os.readlink(f"/proc/{pid}/ns/mnt") != os.readlink("/proc/self/ns/mnt")
+    app.api("POST", f"/api/runs/{run_id}/stop")
+
+
+def nat_processes_of(server: int) -> list[int]:
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = open(f"/proc/{entry}/stat").read()
+            except OSError:
+                continue
+            name, ppid = stat.split("(", 1)[1].split(")")[0], int(stat.rsplit(")", 1)[1].split()[1])
+            if name == "slirp4netns" and ppid == server:
+                found.append(int(entry))
+    return found
