@@ -330,6 +330,8 @@ class RunCgroup:
             _write(d["memory"] / "memory.limit_in_bytes", mem)  # first: memsw may not be less
             if "swap" in self.support.controllers:
                 _write(d["memory"] / "memory.memsw.limit_in_bytes", mem)
+            else:  # swap not counted: 0 keeps the run out of it (limit reclaim then never swaps)
+                _write(d["memory"] / "memory.swappiness", 0)
         if self.pids and "pids" in d:
             _write(d["pids"] / "pids.max", self.pids)
         if percent and "cpu" in d:

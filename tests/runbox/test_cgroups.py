@@ -386,6 +386,43 @@ def test_fake_v2_reclaim_at_the_limit_is_not_meeting_it(tmp_path):
     assert cg.met() == {"memory": "memory limit (64 MB) reached"}
 
 
+def fake_v1(root: Path, memsw: bool) -> Path:
+    """A proc dir and cgroup v1 memory, pids and cpu hierarchies at root/cg, with or without
+    swap accounting (memory.memsw.*: a kernel booted without swapaccount=1)."""
+    proc = root / "proc"
+    proc.mkdir()
+    (proc / "cgroup").write_text("6:memory:/robotide.service\n5:pids:/robotide.service\n")
+    lines = ["22 1 0:21 / / rw - ext4 /dev/vda rw"]
+    for n, name in enumerate(("memory", "pids")):
+        own = root / "cg" / name / "robotide.service"
+        own.mkdir(parents=True)
+        (own / "memory.limit_in_bytes").write_text("9223372036854771712\n")
+        if memsw:
+            (own / "memory.memsw.limit_in_bytes").write_text("9223372036854771712\n")
+        lines.append(f"{30 + n} 22 0:{27 + n} / {root / 'cg' / name} rw - cgroup cgroup rw,{name}")
+    (proc / "mountinfo").write_text("\n".join(lines) + "\n")
+    return proc
+
+
+@pytest.mark.parametrize("memsw", [True, False])
+def test_fake_v1_swap_is_inside_the_limit_with_or_without_accounting(tmp_path, memsw):
+    """Memory with swap: where v1 counts swap (memsw) RAM + swap is limited; where it does not,
+    the run's memory.swappiness is 0, which keeps limit reclaim from ever swapping
+    (Documentation/admin-guide/cgroup-v1/memory.rst), so the run meets its limit in RAM."""
+    support = detect(str(fake_v1(tmp_path, memsw)))
+    assert support.describe().startswith(
+        "cgroup v1 (memory+swap, pids" if memsw else "cgroup v1 (memory, pids"
+    ), support.describe()
+    RunCgroup.create("run-9", support, memory_bytes=64 * MB, pids=16)
+    run = tmp_path / "cg" / "memory" / "robotide.service" / "robotide-runs" / "run-9"
+    assert (run / "memory.limit_in_bytes").read_text() == f"{64 * MB}\n"
+    if memsw:
+        assert (run / "memory.memsw.limit_in_bytes").read_text() == f"{64 * MB}\n"
+        assert not (run / "memory.swappiness").exists()
+    else:
+        assert (run / "memory.swappiness").read_text() == "0\n"
+
+
 def test_fake_v2_agent_already_in_its_leaf(tmp_path):
     # After the move above, a re-detect sees the agent in robotide-agent: runs stay beside it.
     proc = fake_v2(tmp_path, own="/robotide.service/robotide-agent", procs="")
