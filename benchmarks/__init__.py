@@ -10,6 +10,7 @@ tests/appliance.py) on 127.0.0.1 and measures its baselines in the same run.
 BENCHMARKS = (
     "idle_memory",
     "start_overhead",
+    "browser_start",
     "api_roundtrips",
     "languages",
     "throughput",
