@@ -254,8 +254,8 @@ def test_a_full_run_has_the_internet_through_its_nat_and_nothing_of_the_host(
     """Network `full`, as root and rootless: names are looked up through the NAT's DNS
     forwarder, the way out is the run's own tap device, the private ranges are refused, and
     the host's loopback is reached neither behind the NAT's gateway nor on 127.0.0.1."""
-    socket_to_host = subprocess.run(["pg_isready", "-h", "127.0.0.1"], capture_output=True)
-    assert socket_to_host.returncode == 0, "PostgreSQL must answer the host for the control"
+    control = subprocess.run(["pg_isready", "-h", "127.0.0.1"], capture_output=True)
+    assert control.returncode == 0, "PostgreSQL must answer the host for the control"
     result = box_run(mode, readable_copy, FULL_PROBE, network="full")
     log = result["log"]
     assert result["state"] == "finished", log
