@@ -9,7 +9,10 @@ robot itself, done by the computer the agent runs on, offline.
 - ``scan_barcode()``: the barcodes and QR codes in the current frame (zxing-cpp).
 - ``listen(seconds, wav, words)``: speech recognised by pocketsphinx with the en-us model its
   package ships, from the robot's microphone or a WAV file in the program's folder; ``words``
-  narrows what it listens for to a few commands, which makes them far more reliable.
+  narrows what it listens for to a few commands, which makes them far more reliable. Heard
+  in a process of its own (robots/hearing.py: 1 GB, 120 s, a lower priority), one recording
+  at a time per robot with ``MAX_LISTEN_WAITING`` more waiting: the server never holds a
+  recording, and its loop never waits for one.
 
 Which camera: the device in the robot's ``camera`` setting (a V4L2 camera through ffmpeg, as
 the agent's camera hub streams it to the page) when there is one; else the driver's front
@@ -29,13 +32,15 @@ import asyncio
 import base64
 import contextlib
 import io
-import itertools
+import json
+import logging
 import math
 import os
 import re
+import resource
 import shutil
 import stat
-import threading
+import sys
 import time
 import wave
 from pathlib import Path, PurePosixPath
@@ -47,6 +52,7 @@ from django.utils.translation import gettext as _
 import rhal
 from robots.models import Robot
 from robots.rpc import ROBOT_ERROR, RpcError, bind_params
+from runbox import SYSTEM_PATH
 from runbox.isolation import InForce
 
 MAX_SAY_CHARS = 500
@@ -55,11 +61,17 @@ SAY_TIMEOUT = 120.0  # s: longer than the longest text takes at the slowest spee
 DEFAULT_VOICE = "en-us"  # the accent listen()'s model knows best
 DEFAULT_SPEED = 160  # words per minute
 MAX_LISTEN_SECONDS = 30.0
-MAX_AUDIO_SECONDS = 60.0  # of a WAV file
 MAX_AUDIO_BYTES = 32 * 1024 * 1024
+MAX_LISTEN_WAITING = 4  # listen() calls queued behind the one being heard, per robot
+# The recogniser's process (robots/hearing.py): its wall and CPU seconds, its address space.
+HEARING = Path(__file__).with_name("hearing.py")
+HEARING_SECONDS = 120.0
+HEARING_MEMORY = 1024 * 2**20
+HEARING_ENV = {"PATH": SYSTEM_PATH, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
 MAX_PHRASES = 100
 SAMPLE_RATE = 16000  # what the recogniser's model was trained on
 
+log = logging.getLogger(__name__)
 SPEECH_SETTINGS = ("voice", "speed", "pitch", "amplitude", "device", "wav", "microphone")
 _VOICE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_+/-]{0,63}")
 _WORD = re.compile(r"[a-z][a-z'.-]*")
@@ -72,6 +84,8 @@ class HostServices:
         self.agent = agent
         self._speaking = asyncio.Lock()
         self._waiting = 0
+        self._hearing = asyncio.Lock()
+        self._listeners = 0  # listen() calls being heard or waiting
         self.methods = {
             "say": self.say,
             "snapshot": self.snapshot,
@@ -117,18 +131,32 @@ class HostServices:
             raise RpcError(ROBOT_ERROR, f"the robot's speech setting is wrong: {exc}") from None
 
     async def listen(self, active, params):
+        """One recording heard at a time on the robot, MAX_LISTEN_WAITING more waiting; each
+        in a recogniser process of its own (robots/hearing.py), never in the server."""
         seconds, wav, words = bind_params(params, ("seconds", "wav", "words"), 0)
         seconds = _listen_seconds(seconds)
         phrases = _phrases(words)
-        if phrases:  # refused before anything is recorded
-            await asyncio.to_thread(RECOGNISER.check, phrases)
-        if wav is not None:
-            data = await asyncio.to_thread(read_program_file, wav, workdir_of(active))
-            pcm = await audio_to_pcm(data)
-        else:
-            speech = await self.speech_settings()
-            pcm = await record(seconds, speech.get("microphone"))
-        return await asyncio.to_thread(RECOGNISER.recognise, pcm, phrases)
+        if self._listeners > MAX_LISTEN_WAITING:
+            raise RpcError(
+                ROBOT_ERROR,
+                f"the robot is hearing {self._listeners} recordings already: wait for one",
+            )
+        self._listeners += 1
+        try:
+            async with self._hearing:
+                if wav is not None:  # the recogniser reads it, not the server
+                    fd = await asyncio.to_thread(open_program_file, wav, workdir_of(active))
+                    try:
+                        return await hear(phrases, recording=fd)
+                    finally:
+                        os.close(fd)
+                if phrases:  # refused before anything is recorded
+                    await hear(phrases, check=True)
+                speech = await self.speech_settings()
+                samples = await record(seconds, speech.get("microphone"))
+                return await hear(phrases, samples)
+        finally:
+            self._listeners -= 1
 
     # -- the camera -------------------------------------------------------------------------
 
@@ -387,8 +415,9 @@ def workdir_of(active) -> Path:
     return settings.RUNS_DIR / str(active.run_id) / "work"
 
 
-def read_program_file(path, workdir: Path) -> bytes:
-    """The bytes of a file in the run's folder, named as the program sees it: relative to its
+def open_program_file(path, workdir: Path) -> int:
+    """A file in the run's folder, opened for reading (its descriptor, the caller's to close),
+    named as the program sees it: relative to its
     folder, or absolute under /home/robot (its folder in the box) or under `workdir`. Nothing
     outside the folder is read, not even through a symbolic link: the name is walked one
     folder at a time from the folder's own descriptor, never following a link."""
@@ -419,10 +448,11 @@ def read_program_file(path, workdir: Path) -> bytes:
             raise ValueError(f"{path} is not a file")
         if status.st_size > MAX_AUDIO_BYTES:
             raise ValueError(f"{path} is larger than {MAX_AUDIO_BYTES // 2**20} MB")
-        with os.fdopen(fd, "rb", closefd=False) as file:
-            return file.read(MAX_AUDIO_BYTES + 1)
-    finally:
+        os.set_blocking(fd, True)
+        return fd
+    except BaseException:
         os.close(fd)
+        raise
 
 
 def _open_beneath(folder: int, parts: tuple[str, ...]) -> int:
@@ -435,90 +465,6 @@ def _open_beneath(folder: int, parts: tuple[str, ...]) -> int:
         return os.open(parts[-1], os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK, dir_fd=folder)
     finally:
         os.close(folder)
-
-
-async def audio_to_pcm(data: bytes) -> bytes:
-    """A recording as the recogniser hears it: 16 kHz, mono, 16-bit little-endian samples.
-
-    PCM WAV files are read with the standard library; anything else ffmpeg can read (another
-    kind of WAV, MP3, Ogg...) goes through ffmpeg when it is installed.
-    """
-    try:
-        samples, rate = await asyncio.to_thread(_read_wav, data)
-    except (wave.Error, EOFError) as exc:
-        ffmpeg = shutil.which("ffmpeg")
-        if ffmpeg is None:
-            raise ValueError(
-                f"wav is not a PCM WAV file ({exc}); ffmpeg, which reads other kinds, is not"
-                " installed"
-            ) from None
-        return await _ffmpeg_pcm(ffmpeg, data)
-    if len(samples) > MAX_AUDIO_SECONDS * rate:
-        raise ValueError(f"wav is longer than {MAX_AUDIO_SECONDS:g} s")
-    return await asyncio.to_thread(_resample, samples, rate)
-
-
-def _read_wav(data: bytes):
-    """(mono samples as floats, sample rate) of a PCM WAV file."""
-    import numpy as np
-
-    with wave.open(io.BytesIO(data)) as recording:
-        width, channels = recording.getsampwidth(), recording.getnchannels()
-        rate = recording.getframerate()
-        frames = recording.readframes(recording.getnframes())
-    if width == 1:  # 8-bit WAV is unsigned
-        samples = np.frombuffer(frames, np.uint8).astype(np.float64) - 128.0
-        samples *= 256.0
-    elif width == 3:
-        raw = np.frombuffer(frames, np.uint8).reshape(-1, 3)
-        samples = raw[:, 0] | raw[:, 1].astype(np.int32) << 8 | raw[:, 2].astype(np.int32) << 16
-        samples = np.where(samples >= 1 << 23, samples - (1 << 24), samples) / 256.0
-    elif width in (2, 4):
-        samples = np.frombuffer(frames, f"<i{width}").astype(np.float64)
-        samples /= 1 << (8 * (width - 2))
-    else:
-        raise wave.Error(f"{8 * width}-bit samples")
-    samples = samples[: len(samples) // channels * channels].reshape(-1, channels).mean(axis=1)
-    return samples, rate
-
-
-def _resample(samples, rate: int) -> bytes:
-    """To 16 kHz by Fourier interpolation: band-limited, so nothing above 8 kHz folds back
-    into what the recogniser hears."""
-    import numpy as np
-
-    if rate != SAMPLE_RATE and len(samples):
-        count = max(1, round(len(samples) * SAMPLE_RATE / rate))
-        spectrum = np.fft.rfft(samples)
-        bins = count // 2 + 1
-        if len(spectrum) >= bins:
-            spectrum = spectrum[:bins]
-        else:
-            spectrum = np.pad(spectrum, (0, bins - len(spectrum)))
-        samples = np.fft.irfft(spectrum, count) * (count / len(samples))
-    return np.clip(np.round(samples), -32768, 32767).astype("<i2").tobytes()
-
-
-async def _ffmpeg_pcm(ffmpeg: str, data: bytes) -> bytes:
-    process = await asyncio.create_subprocess_exec(
-        ffmpeg, "-nostdin", "-loglevel", "error", "-i", "pipe:0", "-t", str(MAX_AUDIO_SECONDS),
-        "-ac", "1", "-ar", str(SAMPLE_RATE), "-f", "s16le", "pipe:1",
-        stdin=asyncio.subprocess.PIPE,
-        stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.PIPE,
-    )  # fmt: skip
-    try:
-        out, err = await asyncio.wait_for(process.communicate(data), 60)
-    finally:
-        if process.returncode is None:
-            process.kill()
-            await process.wait()
-    if process.returncode != 0:
-        message = err.decode(errors="replace").strip().splitlines()
-        raise ValueError(
-            f"wav is not a recording ffmpeg can read: {message[-1] if message else ''}"
-        )
-    return out
 
 
 async def record(seconds: float, device) -> bytes:
@@ -574,71 +520,54 @@ def _record_sounddevice(sounddevice, seconds: float, device) -> bytes:
     return frames.tobytes()
 
 
+async def hear(
+    phrases: tuple[str, ...], samples: bytes = b"", recording: int | None = None, check=False
+) -> dict:
+    """What robots/hearing.py hears: in the file open as `recording` (read there, not here),
+    else in `samples` (16 kHz), or whether it knows the phrases' words (`check`); ValueError
+    for what the program gave wrong."""
+    request = {"phrases": list(phrases), "check": check, "recording": recording}
+    process = await asyncio.create_subprocess_exec(
+        sys.executable, "-I", str(HEARING),
+        stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE, env=HEARING_ENV, preexec_fn=_hearing_limits,
+        pass_fds=() if recording is None else (recording,),
+    )  # fmt: skip
+    try:
+        out, err = await asyncio.wait_for(
+            process.communicate(json.dumps(request).encode() + b"\n" + samples), HEARING_SECONDS
+        )
+    except TimeoutError:
+        raise RpcError(
+            ROBOT_ERROR, f"listen() gave up: hearing took more than {HEARING_SECONDS:g} s"
+        ) from None
+    finally:
+        if process.returncode is None:
+            process.kill()
+            await process.wait()
+    try:
+        answer = json.loads(out)
+    except ValueError:
+        why = err.decode(errors="replace").strip().splitlines()
+        log.warning("listen(): the recogniser ended with %s: %s", process.returncode, why[-1:])
+        raise RpcError(
+            ROBOT_ERROR,
+            "listen() could not hear it: the recogniser ran out of memory or time"
+            f" ({HEARING_MEMORY // 2**20} MB, {HEARING_SECONDS:g} s)",
+        ) from None
+    if "error" in answer:
+        raise ValueError(answer["error"])
+    return answer
+
+
+def _hearing_limits() -> None:
+    """In the recogniser's process before it starts: its memory and CPU, and a lower
+    priority than the server's."""
+    resource.setrlimit(resource.RLIMIT_AS, (HEARING_MEMORY, HEARING_MEMORY))
+    cpu = int(HEARING_SECONDS)
+    resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu))
+    os.nice(10)
+
+
 def _no_sound_card() -> str:
     return "" if Path("/dev/snd").exists() else " (this computer has no sound card)"
-
-
-class Recogniser:
-    """pocketsphinx with its bundled en-us model, loaded once and shared: one utterance at a
-    time. Recognition is batch (cepstral mean over the whole utterance), so what it hears does
-    not depend on what it heard before."""
-
-    MAX_GRAMMARS = 32
-
-    def __init__(self):
-        self._lock = threading.Lock()
-        self._decoder = None
-        self._grammars: dict[tuple[str, ...], str] = {}  # phrases -> search name, oldest first
-        self._names = itertools.count()
-
-    def _load(self):
-        if self._decoder is None:
-            from pocketsphinx import Decoder
-
-            self._decoder = Decoder(samprate=SAMPLE_RATE, loglevel="FATAL")
-        return self._decoder
-
-    def check(self, phrases: tuple[str, ...]) -> None:
-        """ValueError naming a word the model's dictionary lacks."""
-        with self._lock:
-            decoder = self._load()
-            for phrase in phrases:
-                for word in phrase.split():
-                    if decoder.lookup_word(word) is None:
-                        raise ValueError(f"listen() does not know the word {word!r}")
-
-    def recognise(self, pcm: bytes, phrases: tuple[str, ...]) -> dict:
-        """{"text": what was said, "words": its words}; with ``phrases``, the text is the one
-        of them heard, or "" when none was."""
-        with self._lock:
-            decoder = self._load()
-            decoder.activate_search(self._grammar(decoder, phrases) if phrases else "_default")
-            decoder.start_utt()
-            if pcm:
-                decoder.process_raw(pcm, full_utt=True)
-            decoder.end_utt()
-            hypothesis = decoder.hyp()
-            text = " ".join(hypothesis.hypstr.split()) if hypothesis else ""
-            words = [
-                re.sub(r"\(\d+\)$", "", segment.word)  # "the(2)": a second pronunciation
-                for segment in decoder.seg() or ()
-                if not segment.word.startswith(("<", "["))  # silence, noise
-            ]
-        if phrases and text not in phrases:  # it got part of the way into one: no command
-            return {"text": "", "words": []}
-        return {"text": text, "words": words}
-
-    def _grammar(self, decoder, phrases: tuple[str, ...]) -> str:
-        name = self._grammars.pop(phrases, None)
-        if name is None:
-            name = f"words{next(self._names)}"
-            grammar = f"#JSGF V1.0;\ngrammar words;\npublic <words> = {' | '.join(phrases)};\n"
-            decoder.add_jsgf_string(name, grammar)
-            if len(self._grammars) >= self.MAX_GRAMMARS:
-                decoder.activate_search("_default")  # never remove the search in use
-                decoder.remove_search(self._grammars.pop(next(iter(self._grammars))))
-        self._grammars[phrases] = name  # the most recently used last
-        return name
-
-
-RECOGNISER = Recogniser()

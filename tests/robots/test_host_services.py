@@ -467,6 +467,69 @@ async def test_listen_refuses_unknown_words_and_odd_params(bot, workdir):
         assert error.code == -32602 and words in str(error), (params, str(error))
 
 
+def write_wav(path: Path, samples: bytes, rate: int, width: int = 2) -> None:
+    with wave.open(str(path), "wb") as recording:
+        recording.setnchannels(1)
+        recording.setsampwidth(width)
+        recording.setframerate(rate)
+        recording.writeframes(samples)
+
+
+async def test_hearing_a_long_recording_does_not_hold_up_the_server(agent, bot, workdir):
+    """pocketsphinx holds the interpreter while it hears a recording (47 s for a minute of
+    noise): in the server, every robot, page and stop waited that long. The loop that
+    serves them must keep its pace while a program's noise is heard."""
+    noise = np.random.default_rng(1).integers(-12000, 12000, 6 * 16000, dtype="<i2")
+    write_wav(workdir / "noise.wav", noise.tobytes(), 16000)
+    gaps, hearing = [], asyncio.ensure_future(bot.call("listen", None, "noise.wav"))
+    before = time.monotonic()
+    while not hearing.done():
+        await asyncio.sleep(0.01)
+        now = time.monotonic()
+        gaps.append(now - before)
+        before = now
+    heard = await hearing
+    assert isinstance(heard["text"], str)
+    assert max(gaps) < 0.5, f"the loop stood still for {max(gaps):.2f} s"
+
+
+async def test_large_recordings_at_once_stay_out_of_the_servers_memory(agent, workdir):
+    """A program's threads each asking to hear a 32 MB recording at a high rate: decoded and
+    resampled in the server, they made it hold gigabytes (the kernel killed it). Each is
+    refused by what its header says, and the robot hears one at a time, 4 waiting."""
+    write_wav(workdir / "big.wav", bytes(32 * 2**20 - 64), 600_000, width=1)
+    clients = [
+        await asyncio.to_thread(robot_client.Robot, agent.server.url, TOKEN) for _ in range(7)
+    ]
+    before, peak, errors = rss(), 0, []
+
+    async def ask(client):
+        try:
+            await asyncio.to_thread(client.call, "listen", None, "big.wav")
+        except robot_client.RobotError as exc:
+            errors.append(exc)
+
+    asking = asyncio.ensure_future(asyncio.gather(*(ask(c) for c in clients)))
+    while not asking.done():
+        peak = max(peak, rss())
+        await asyncio.sleep(0.02)
+    for client in clients:
+        client.close()
+    assert (peak - before) < 100 * 2**20, f"the server grew by {(peak - before) >> 20} MB"
+    assert len(errors) == 7, errors
+    refused = [e for e in errors if e.code == -32602 and "600000 samples a second" in str(e)]
+    busy = [e for e in errors if e.code == -32000 and "hearing" in str(e)]
+    assert len(refused) + len(busy) == 7 and len(refused) >= 5, [str(e) for e in errors]
+
+
+def rss() -> int:
+    """This process's resident memory (the agent serves from it)."""
+    for line in open("/proc/self/status"):
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) * 1024
+    raise AssertionError("no VmRSS")
+
+
 @pytest.mark.skipif(Path("/dev/snd").exists(), reason="this computer has a sound card")
 async def test_listen_to_a_microphone_that_is_not_there_is_a_clear_error(bot):
     error = await bot.error("listen", 1, None, ["move"])
