@@ -119,6 +119,6 @@ def robot_estop(request, name: str):
 
 @robots_router.post("/{name}/resume", response={200: dict})
 def robot_resume(request, name: str):
-    """After an emergency stop: staff, the robot's owner or whoever pressed it."""
+    """After an emergency stop: staff, the robot's owner or whoever pressed it (alone)."""
     robot = get_robot_for_user(request.user, name)
     return {"robot": robot.name, "waiting": stops.resume(request.user, robot, "the API")}

@@ -189,6 +189,15 @@ class RobotStop(models.Model):
         last = cls.objects.filter(robot_id=robot_id).first()
         return last if last is not None and last.kind == "estop" else None
 
+    @classmethod
+    def pressed_by_others(cls, robot_id: int, user) -> bool:
+        """Whether someone else pressed the robot's stop since it was last resumed."""
+        presses = cls.objects.filter(robot_id=robot_id, kind="estop")
+        resumed = cls.objects.filter(robot_id=robot_id, kind="resume").first()
+        if resumed is not None:
+            presses = presses.filter(pk__gt=resumed.pk)
+        return presses.exclude(user_id=user.pk).exists()
+
 
 #: Where a stop or resume came from (RobotStop.via): stored in English, shown translated.
 VIAS = (

@@ -1,7 +1,8 @@
 """Emergency stops and resumes, from the web tier: who may, doing it, and the record of it.
 
 Whoever may see a robot may press its emergency stop unless its owner chose otherwise
-(``Robot.estop_by``); staff, its owner and whoever pressed it may resume. Every press and
+(``Robot.estop_by``); staff, its owner and whoever pressed it may resume (when others
+pressed it too since it was last resumed: staff and its owner only). Every press and
 resume is recorded (``RobotStop``: who, when, through what, the runs it ended), also when
 the robot's agent could not be reached.
 """
@@ -33,9 +34,17 @@ def press(user, robot: Robot, via: str) -> RobotStop:
 
 
 def may_resume(user, robot: Robot, pressed: RobotStop | None) -> bool:
+    """Staff and the robot's owner; whoever pressed the stop while every press in force is
+    theirs (pressing on top of a teacher's stop gives a student no say over it)."""
     if not user.is_authenticated:
         return False
-    return robot.configurable_by(user) or (pressed is not None and pressed.user_id == user.pk)
+    if robot.configurable_by(user):
+        return True
+    return (
+        pressed is not None
+        and pressed.user_id == user.pk
+        and not RobotStop.pressed_by_others(robot.pk, user)
+    )
 
 
 def resume(user, robot: Robot, via: str) -> int:

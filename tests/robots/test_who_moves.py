@@ -129,6 +129,27 @@ def test_who_may_resume_and_the_record_of_it(lab):
     assert staff.get("/admin/robots/robotstop/add/").status_code == 403
 
 
+def test_a_student_cannot_lift_a_teachers_stop_by_pressing_it_again(lab):
+    """Whoever pressed a stop may lift it only while every press in force is theirs (else
+    it takes staff or the robot's owner): a student pressing after the teacher did became
+    "whoever pressed it", resumed the robot, and the queue the stop held moved."""
+    users, robot = lab
+    for who in ("tina", "sam"):  # the teacher's stop, then the student's press on top of it
+        RobotStop.objects.create(robot=robot, kind="estop", user=users[who], username=who,
+                                 via="the API")  # fmt: skip
+    for who in ("sam", "tina"):
+        status, body = api(users[who])("POST", "/api/robots/arm/resume")
+        assert status == 403, (who, body)
+    assert RobotStop.pressed(robot.pk) is not None  # still stopped
+    status, body = api(users["olga"])("POST", "/api/robots/arm/resume")  # its owner may
+    assert status == 200, body
+    # After a resume, a stop only the student pressed is the student's to lift.
+    RobotStop.objects.create(robot=robot, kind="estop", user=users["sam"], username="sam",
+                             via="the API")  # fmt: skip
+    status, body = api(users["sam"])("POST", "/api/robots/arm/resume")
+    assert status == 200, body
+
+
 def test_the_robot_page_says_it_is_stopped_and_who_may_resume(lab):
     users, robot = lab
     RobotStop.objects.create(robot=robot, kind="estop", user=users["sam"], username="sam",
