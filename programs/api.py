@@ -177,7 +177,8 @@ def get_program(request, program_id: int):
 @programs_router.put("/{int:program_id}", response={200: ProgramOut, 409: Error})
 def update_program(request, program_id: int, data: ProgramUpdate):
     program = get_program_for_user(request.user, program_id, EDIT)
-    if data.name is not None:
+    if data.name is not None and data.name != program.name:
+        get_program_for_user(request.user, program_id, OWN)  # renaming: its owner's (403)
         program.name = data.name
     if data.language is not None:
         program.language = data.language

@@ -318,6 +318,25 @@ def test_the_matrix_has_every_cell():
     assert len(list(websocket_cells())) == len(MATRIX) * len(ACTORS)
 
 
+def test_an_editor_edits_the_source_but_renames_nothing(world):
+    """Renaming is its owner's and admins' (programs/access.py): B, who may edit P, renamed it
+    through the API, and the 409 of a name A already had told B A's private programs' names."""
+    Program.objects.create(owner=world.users["A"], name="my private exam answers")
+    world.share("user-edit")
+    b, pk = world.client("B"), world.program.pk
+    for name in ("renamed by ben", "my private exam answers"):
+        response = api(b, "put", f"/api/programs/{pk}", {"name": name})
+        assert response.status_code == 403, (name, response.content)
+        assert "exam" not in response.content.decode()
+    assert api(b, "put", f"/api/programs/{pk}", {"source": "print('ben')\n"}).status_code == 200
+    same = api(b, "put", f"/api/programs/{pk}", {"name": "secret plan", "source": SOURCE})
+    assert same.status_code == 200, same.content  # its own name again is no renaming
+    world.program.refresh_from_db()
+    assert world.program.name == "secret plan" and world.program.source == SOURCE
+    owner = api(world.client("A"), "put", f"/api/programs/{pk}", {"name": "plan B"})
+    assert owner.status_code == 200
+
+
 # -- unsharing takes access away at once -------------------------------------------------
 
 
