@@ -113,7 +113,7 @@ def program_draft(request: HttpRequest, program_id: int) -> HttpResponse:
         defaults={
             "source": form.cleaned_data["source"],
             "language": form.cleaned_data["language"],
-            "base_revision": int(base) if base.isdigit() else 0,
+            "base_revision": revision_number(base) or 0,
             "updated": timezone.now(),
         },
     )
@@ -195,10 +195,16 @@ def save_edit(request: HttpRequest, program: Program, data: dict) -> Revision:
 def check_base(program: Program, base: str, source: str) -> None:
     """Conflict if another revision was saved since ``base`` (the one the editor opened) and
     this text would overwrite it; no base (an old page, the API) is no conflict."""
-    latest = program.revisions.first()
-    if base.isdigit() and latest is not None and latest.number != int(base):
+    latest, number = program.revisions.first(), revision_number(base)
+    if number is not None and latest is not None and latest.number != number:
         if latest.source != source:
-            raise Conflict(program, int(base), source)
+            raise Conflict(program, number, source)
+
+
+def revision_number(text: str) -> int | None:
+    """A revision's number as a page sent it: ASCII digits of a sane length, else None
+    (str.isdigit() passes "²", which int() refuses, and "١٢", which it reads as 12)."""
+    return int(text) if text.isascii() and text.isdigit() and len(text) <= 9 else None
 
 
 def _conflict(conflict: Conflict) -> JsonResponse:

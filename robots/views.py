@@ -4,7 +4,7 @@ from django.contrib import messages
 from django.contrib.admin.views.decorators import staff_member_required
 from django.contrib.auth.decorators import login_required
 from django.core.exceptions import PermissionDenied
-from django.http import HttpRequest, HttpResponse
+from django.http import Http404, HttpRequest, HttpResponse
 from django.shortcuts import get_object_or_404, redirect, render
 from django.utils.http import url_has_allowed_host_and_scheme
 from django.utils.translation import gettext as _
@@ -156,7 +156,10 @@ def robot_buttons(request: HttpRequest, name: str) -> HttpResponse:
         raise PermissionDenied(_("Only the robot's owner or staff set up its buttons."))
     button = None
     if "edit" in request.GET:
-        button = get_object_or_404(RobotButton, robot=robot, pk=request.GET["edit"])
+        number = request.GET["edit"]
+        if not (number.isascii() and number.isdigit() and len(number) <= 9):
+            raise Http404
+        button = get_object_or_404(RobotButton, robot=robot, pk=int(number))
     form = ButtonForm(request.POST or None, instance=button, user=request.user, robot=robot)
     if request.method == "POST" and form.is_valid():
         saved = form.save()
