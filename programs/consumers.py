@@ -3,6 +3,7 @@
 import asyncio
 import logging
 import re
+import time
 from urllib.parse import parse_qs, urlencode
 
 from channels.db import database_sync_to_async
@@ -20,6 +21,8 @@ from robotide.ws_user import user_of
 from robots.bus import RUNS_GROUP, console_group, run_group
 
 LIST_REFRESH_INTERVAL = 0.5
+# How long a viewer's access stands before output it is sent makes it read again.
+ACCESS_RECHECK_SECONDS = 2.0
 log = logging.getLogger(__name__)
 
 
@@ -71,7 +74,18 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
         except Http404:
             return None
         self.place_of = places_in(self.run)
+        self.checked = time.monotonic()
         return self.catch_up(page_offset)
+
+    @database_sync_to_async
+    def may_still_see(self) -> bool:
+        """Access read again (at most every ACCESS_RECHECK_SECONDS, as output comes)."""
+        self.checked = time.monotonic()
+        try:
+            get_run_for_user(self.scope["user"], self.run.pk)
+        except Http404:
+            return False
+        return True
 
     # One trip to a worker thread: a start's first line waits for it.
     see_run = database_sync_to_async(seen)
@@ -97,6 +111,11 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
     async def run_output(self, event):
         if self.group is None:  # turned away, with this already on its way
             return
+        if time.monotonic() - self.checked >= ACCESS_RECHECK_SECONDS:
+            if not await self.may_still_see():  # its teacher left the class, a share went
+                await self.leave_run_group()
+                await self.close(code=4404)
+                return
         fresh = [line for line in event["lines"] if line[0] >= self.offset]
         if not fresh:
             return

@@ -2,6 +2,7 @@
 
 import json
 import math
+import time
 
 from asgiref.sync import sync_to_async
 from channels.db import database_sync_to_async
@@ -41,6 +42,11 @@ def parse_control(text: str | None) -> tuple[str, tuple[float, float] | None] | 
     return None
 
 
+# How long a connection's access stands before it is read again (the robot's classes, who may
+# drive it): at the next command or telemetry after that.
+ACCESS_RECHECK_SECONDS = 2.0
+
+
 @database_sync_to_async
 def _get_robot(user, name):
     try:
@@ -58,6 +64,7 @@ class RobotConsumer(DirectDispatch, AsyncWebsocketConsumer):
         self.shows: dict[str, dict] = {}
         self.drove = False
         self.may_drive = await database_sync_to_async(self.robot.drivable_by)(self.scope["user"])
+        self.checked = time.monotonic()
         self.group = robot_group(self.robot.name)
         await self.channel_layer.group_add(self.group, self.channel_name)
         await self.accept()
@@ -75,7 +82,7 @@ class RobotConsumer(DirectDispatch, AsyncWebsocketConsumer):
         ``{"stop": true}`` when let go, ``{"release": true}`` to give up control,
         ``{"take": true}`` for staff to take control over."""
         command = parse_control(text_data)
-        if command is None:
+        if command is None or not await self.still_allowed():
             return
         kind, speeds = command
         user = self.scope["user"]
@@ -117,7 +124,31 @@ class RobotConsumer(DirectDispatch, AsyncWebsocketConsumer):
         html = render_to_string("robots/_teleop_status.html", {"error": event["error"]})
         await self.send(html)
 
+    async def still_allowed(self) -> bool:
+        """Access read again once ACCESS_RECHECK_SECONDS have passed (a class losing the
+        robot, its owner narrowing who drives it): a viewer who may no longer see it is
+        closed, and what it drove released."""
+        if time.monotonic() - self.checked < ACCESS_RECHECK_SECONDS:
+            return True
+        self.checked = time.monotonic()
+        user = self.scope["user"]
+        robot = await _get_robot(user, self.robot.name)
+        may_drive = robot is not None and await database_sync_to_async(robot.drivable_by)(user)
+        if self.drove and not may_drive:
+            await send_to_agent(self.robot.name, "robot.release", owner=self.channel_name)
+            self.drove = False
+        self.may_drive = may_drive
+        if robot is None:
+            await self.channel_layer.group_discard(self.group, self.channel_name)
+            self.group = None
+            await self.close(code=4404)
+            return False
+        self.robot = robot
+        return True
+
     async def robot_telemetry(self, event):
+        if not await self.still_allowed():
+            return
         shows_changed = bool(event["shows"] or event.get("all_shows"))
         if event.get("all_shows"):
             self.shows = {}

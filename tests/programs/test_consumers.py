@@ -12,7 +12,7 @@ from django.contrib.auth.models import AnonymousUser, Group, User
 from programs.consumers import ConsoleConsumer, RunConsumer, RunListConsumer
 from programs.models import Program, Run
 from robotide.models import ClassTeacher
-from robots.bus import RUNS_GROUP, console_group, run_group
+from robots.bus import RUNS_GROUP, agent_channel, console_group, run_group
 from robots.consumers import RobotConsumer
 from robots.models import Robot
 
@@ -265,3 +265,45 @@ async def test_a_console_shows_no_run_its_user_may_not_see():
     await get_channel_layer().group_send(console_group(other.pk, bob.pk), attach)
     assert await comm.receive_nothing(timeout=0.3)
     await comm.disconnect()
+
+
+async def test_a_robot_websocket_stops_driving_once_its_user_may_no_longer(monkeypatch):
+    """Access is decided again while the page stays open: a student whose class lost the
+    robot kept driving it over the websocket opened before (red team). Once the re-check
+    is due, the drive is refused and the connection closes; the agent is told to release
+    what it drove."""
+    monkeypatch.setattr("robots.consumers.ACCESS_RECHECK_SECONDS", 0.0, raising=False)
+    alice, _, run = await make_run(b"")
+    group = await database_sync_to_async(Group.objects.create)(name="class-a")
+    robot = await database_sync_to_async(Robot.objects.get)(name="sim")
+    await database_sync_to_async(robot.groups.add)(group)
+    await database_sync_to_async(alice.groups.add)(group)
+    comm = communicator(RobotConsumer, "/ws/robots/sim/", alice, name="sim")
+    assert (await comm.connect())[0]
+    await comm.receive_from()  # the running programs
+    layer = get_channel_layer()
+    await comm.send_to(text_data='{"drive": [0.5, 0]}')
+    told = await asyncio.wait_for(layer.receive(agent_channel("sim")), 2)
+    assert told["type"] == "robot.teleop" and told["linear"] == 0.5
+    await database_sync_to_async(alice.groups.remove)(group)  # the class loses the robot
+    await comm.send_to(text_data='{"drive": [0.5, 0]}')
+    told = await asyncio.wait_for(layer.receive(agent_channel("sim")), 2)
+    assert told["type"] == "robot.release", told  # not another drive
+    assert (await comm.receive_output(2))["type"] == "websocket.close"
+
+
+async def test_a_run_websocket_closes_once_its_viewer_may_no_longer_see_the_run(monkeypatch):
+    """A teacher watching a student's run is no longer the class's teacher: the output after
+    the re-check is not sent, and the connection closes (before, it went on streaming)."""
+    monkeypatch.setattr("programs.consumers.ACCESS_RECHECK_SECONDS", 0.0, raising=False)
+    alice, _, run = await make_run(b"o first\n")
+    teacher = await database_sync_to_async(teacher_of)(alice)
+    comm = communicator(RunConsumer, f"/ws/runs/{run.pk}/", teacher, run_id=run.pk)
+    assert (await comm.connect())[0]
+    await comm.receive_from()  # the tail
+    await comm.receive_from()  # the state
+    await database_sync_to_async(ClassTeacher.objects.filter(user=teacher).delete)()
+    event = {"type": "run.output", "run_id": run.pk, "lines": [[8, "o", "secret"]]}
+    await get_channel_layer().group_send(run_group(run.pk), event)
+    output = await comm.receive_output(2)
+    assert output["type"] == "websocket.close", output
