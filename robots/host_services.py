@@ -417,10 +417,10 @@ def workdir_of(active) -> Path:
 
 def open_program_file(path, workdir: Path) -> int:
     """A file in the run's folder, opened for reading (its descriptor, the caller's to close),
-    named as the program sees it: relative to its
-    folder, or absolute under /home/robot (its folder in the box) or under `workdir`. Nothing
-    outside the folder is read, not even through a symbolic link: the name is walked one
-    folder at a time from the folder's own descriptor, never following a link."""
+    named as the program sees it: relative to its folder, or absolute under /home/robot (its
+    folder in the box) or under `workdir`. Nothing outside the folder is opened, not even
+    through a symbolic link: the name is walked one folder at a time from the folder's own
+    descriptor, never following a link."""
     if not isinstance(path, str) or not path or "\0" in path:
         raise ValueError("wav must be the name of a file in the program's folder")
     named = PurePosixPath(path)
