@@ -2,7 +2,6 @@
 
 import asyncio
 import logging
-import re
 import time
 from urllib.parse import parse_qs, urlencode
 
@@ -17,6 +16,7 @@ from programs.access import get_program_for_user, get_run_for_user
 from programs.runlog import count_lines_between, lines_after, places_in, render_lines, tail
 from programs.views import run_tables_context
 from robotide.consumers import DirectDispatch
+from robotide.security import plain_number
 from robotide.ws_user import user_of
 from robots.bus import RUNS_GROUP, console_group, run_group
 
@@ -267,11 +267,7 @@ def query_param(scope, name: str) -> str | None:
     return values[0] if values else None
 
 
-OFFSET = re.compile(r"[0-9]{1,18}")
-
-
 def shown_up_to(scope) -> int | None:
-    """The log offset the page was rendered with; None (a fresh tail) if absent or not plain
-    ASCII digits: str.isdigit() passes "²", which int() refuses, and "١", which it takes."""
-    value = query_param(scope, "from")
-    return int(value) if value and OFFSET.fullmatch(value) else None
+    """The log offset the page was rendered with; None (a fresh tail) if absent or not a
+    plain number."""
+    return plain_number(query_param(scope, "from"), digits=18)

@@ -29,6 +29,7 @@ from programs import blocks
 from programs.access import EDIT, can, get_program_for_user
 from programs.forms import EditProgramForm, free_name
 from programs.models import Draft, Program, Revision
+from robotide.security import plain_number
 from robots.models import get_robot_for_user
 from robots.runs import RunRefused, start_run
 from robots.views import robot_state_context
@@ -113,7 +114,7 @@ def program_draft(request: HttpRequest, program_id: int) -> HttpResponse:
         defaults={
             "source": form.cleaned_data["source"],
             "language": form.cleaned_data["language"],
-            "base_revision": revision_number(base) or 0,
+            "base_revision": plain_number(base) or 0,
             "updated": timezone.now(),
         },
     )
@@ -195,16 +196,10 @@ def save_edit(request: HttpRequest, program: Program, data: dict) -> Revision:
 def check_base(program: Program, base: str, source: str) -> None:
     """Conflict if another revision was saved since ``base`` (the one the editor opened) and
     this text would overwrite it; no base (an old page, the API) is no conflict."""
-    latest, number = program.revisions.first(), revision_number(base)
+    latest, number = program.revisions.first(), plain_number(base)
     if number is not None and latest is not None and latest.number != number:
         if latest.source != source:
             raise Conflict(program, number, source)
-
-
-def revision_number(text: str) -> int | None:
-    """A revision's number as a page sent it: ASCII digits of a sane length, else None
-    (str.isdigit() passes "²", which int() refuses, and "١٢", which it reads as 12)."""
-    return int(text) if text.isascii() and text.isdigit() and len(text) <= 9 else None
 
 
 def _conflict(conflict: Conflict) -> JsonResponse:

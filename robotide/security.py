@@ -14,6 +14,7 @@
 import hashlib
 import ipaddress
 import math
+import re
 import time
 from urllib.parse import urlsplit
 
@@ -42,6 +43,15 @@ from django.utils.translation import ngettext
 from django.views import defaults
 
 # -- Content Security Policy ----------------------------------------------------------------------
+
+
+def plain_number(text: str | None, digits: int = 9) -> int | None:
+    """A number as a page, a form or a link carries it: ASCII digits, at most `digits` of
+    them (9 fit any integer column), else None. str.isdigit() passes "²", which int()
+    refuses, and "١٢", which it reads as 12; a long one overflows the database's integer."""
+    if text and re.fullmatch(rf"[0-9]{{1,{digits}}}", text):
+        return int(text)
+    return None
 
 
 class CSPMiddleware(csp.middleware.CSPMiddleware):

@@ -13,6 +13,7 @@ from django.views.decorators.http import require_POST
 
 from programs.access import get_program_for_user, programs_for_user, runs_for_user
 from programs.models import Run, in_line
+from robotide.security import plain_number
 from robots import gateway_views, run_queue, stops
 from robots.bus import AgentUnavailable, ask_agent_sync, reconfigure_sync
 from robots.camera import has_camera
@@ -156,10 +157,10 @@ def robot_buttons(request: HttpRequest, name: str) -> HttpResponse:
         raise PermissionDenied(_("Only the robot's owner or staff set up its buttons."))
     button = None
     if "edit" in request.GET:
-        number = request.GET["edit"]
-        if not (number.isascii() and number.isdigit() and len(number) <= 9):
+        number = plain_number(request.GET["edit"])
+        if number is None:
             raise Http404
-        button = get_object_or_404(RobotButton, robot=robot, pk=int(number))
+        button = get_object_or_404(RobotButton, robot=robot, pk=number)
     form = ButtonForm(request.POST or None, instance=button, user=request.user, robot=robot)
     if request.method == "POST" and form.is_valid():
         saved = form.save()
