@@ -48,22 +48,24 @@ ACCESS_RECHECK_SECONDS = 2.0
 
 
 @database_sync_to_async
-def _get_robot(user, name):
+def _access(user, name):
+    """The robot if `user` may see it, and whether they may drive it, in one trip."""
     try:
-        return get_robot_for_user(user, name)
+        robot = get_robot_for_user(user, name)
     except Http404:
-        return None
+        return None, False
+    return robot, robot.drivable_by(user)
 
 
 class RobotConsumer(DirectDispatch, AsyncWebsocketConsumer):
     async def connect(self):
-        self.robot = await _get_robot(self.scope["user"], self.scope["url_route"]["kwargs"]["name"])
+        name = self.scope["url_route"]["kwargs"]["name"]
+        self.robot, self.may_drive = await _access(self.scope["user"], name)
         if self.robot is None:
             await self.close(code=4404)
             return
         self.shows: dict[str, dict] = {}
         self.drove = False
-        self.may_drive = await database_sync_to_async(self.robot.drivable_by)(self.scope["user"])
         self.checked = time.monotonic()
         self.group = robot_group(self.robot.name)
         await self.channel_layer.group_add(self.group, self.channel_name)
@@ -131,9 +133,7 @@ class RobotConsumer(DirectDispatch, AsyncWebsocketConsumer):
         if time.monotonic() - self.checked < ACCESS_RECHECK_SECONDS:
             return True
         self.checked = time.monotonic()
-        user = self.scope["user"]
-        robot = await _get_robot(user, self.robot.name)
-        may_drive = robot is not None and await database_sync_to_async(robot.drivable_by)(user)
+        robot, may_drive = await _access(self.scope["user"], self.robot.name)
         if self.drove and not may_drive:
             await send_to_agent(self.robot.name, "robot.release", owner=self.channel_name)
             self.drove = False

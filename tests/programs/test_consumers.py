@@ -278,10 +278,11 @@ async def test_a_robot_websocket_stops_driving_once_its_user_may_no_longer(monke
     robot = await database_sync_to_async(Robot.objects.get)(name="sim")
     await database_sync_to_async(robot.groups.add)(group)
     await database_sync_to_async(alice.groups.add)(group)
+    layer = get_channel_layer()
+    await layer.flush()  # what earlier tests left for an agent of "sim"
     comm = communicator(RobotConsumer, "/ws/robots/sim/", alice, name="sim")
     assert (await comm.connect())[0]
     await comm.receive_from()  # the running programs
-    layer = get_channel_layer()
     await comm.send_to(text_data='{"drive": [0.5, 0]}')
     told = await asyncio.wait_for(layer.receive(agent_channel("sim")), 2)
     assert told["type"] == "robot.teleop" and told["linear"] == 0.5
