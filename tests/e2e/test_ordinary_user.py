@@ -265,12 +265,13 @@ def test_stop_before_the_wall_runs_in_its_box(app):
     assert "[robotide] finished: exit status 0" in log
 
 
+LOOPBACKS = ("127.0.0.1", "::1")
 PROBE = """
 import os, socket
 print("UIDMAP", open("/proc/self/uid_map").read().split())
 print("API", os.environ.get("ROBOT_API_TCP"))
 for port in {ports!r}:
-    for host in ("127.0.0.1", "::1"):
+    for host in {hosts!r}:
         try:
             socket.create_connection((host, port), timeout=3).close()
             print("CONNECTED", host, port)
@@ -304,7 +305,8 @@ def test_a_run_reaches_neither_the_hosts_services_nor_the_servers_port(app, newc
     services = [5432, 6379, app.port]  # PostgreSQL, Redis, the web server itself
     listening = host_listening_ports()
     assert app.port in listening  # the control: the host's table has the server
-    run, log = app.run_source("probe network", PROBE.format(ports=services, paths=[]))
+    source = PROBE.format(ports=services, hosts=LOOPBACKS, paths=[])
+    run, log = app.run_source("probe network", source)
     assert run["state"] == "finished", f"{run['reason']}: {log}"
     assert "CONNECTED" not in log, log
     assert log.count("REFUSED") == 2 * len(services), log
@@ -319,19 +321,15 @@ def test_a_run_reaches_neither_the_hosts_services_nor_the_servers_port(app, newc
     assert not {int(local.rsplit(":", 1)[1], 16) for _, local, _ in sockets} & set(services)
 
 
+# A full run's probe: its resolver and its way out, then the host's services both on its
+# own loopback and behind the NAT's gateway (the host's loopback, were it open).
 FULL_PROBE = (
     DNS_PROBE
     + """
 routes = [line.split() for line in open("/proc/net/route").read().splitlines()[1:]]
 print("DEFAULT", [r[0] for r in routes if r[1] == "00000000" and r[7] == "00000000"])
-for port in {ports!r}:
-    for host in ("127.0.0.1", "10.0.2.2"):
-        try:
-            socket.create_connection((host, port), timeout=2).close()
-            print("CONNECTED", host, port)
-        except OSError as e:
-            print("REFUSED", host, port, type(e).__name__)
 """
+    + PROBE
 )
 
 
@@ -381,7 +379,8 @@ def test_a_full_run_of_the_ordinary_user_has_the_nat_and_nothing_of_the_host(
     assert app.api("POST", "/api/robots", body).status_code == 201
     wait_for(lambda: app.api("GET", "/api/robots/open/sensors").status_code == 200)
     services = [5432, 6379, app.port]
-    run, log = app.run_source("probe full", FULL_PROBE.format(ports=services), robot="open")
+    source = FULL_PROBE.format(ports=services, hosts=("127.0.0.1", "10.0.2.2"), paths=[])
+    run, log = app.run_source("probe full", source, robot="open")
     assert run["state"] == "finished", f"{run['reason']}: {log}"
     assert "SERVERS ['10.0.2.3']" in log and DNS_ANSWERED in log, log
     assert "DEFAULT ['tap0']" in log, log
@@ -395,7 +394,7 @@ def test_a_run_cannot_see_the_users_own_files(app, newcomer):
                               data, app.clone / "pyproject.toml", app.clone, app.home,
                               app.home / ".profile")]  # fmt: skip
     assert all(os.path.exists(p) for p in paths)  # the control: they are there, outside
-    run, log = app.run_source("probe files", PROBE.format(ports=[], paths=paths))
+    run, log = app.run_source("probe files", PROBE.format(ports=[], hosts=LOOPBACKS, paths=paths))
     assert run["state"] == "finished", f"{run['reason']}: {log}"
     assert log.count("DENIED") == len(paths) and "READ" not in log and "LISTED" not in log, log
     assert secret.decode() not in log
