@@ -1,6 +1,7 @@
 """Live run output and the live list of runs, as HTML fragments for htmx's ws extension."""
 
 import asyncio
+import contextlib
 import logging
 import time
 from urllib.parse import parse_qs, urlencode
@@ -147,6 +148,8 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
                     await self.close()
                     return
                 await self.send(html)
+        except OSError:  # uvicorn's ClientDisconnected: the viewer left meanwhile
+            return
         except Exception:
             log.exception("run %s: could not send its state", self.run.pk)
 
@@ -252,7 +255,8 @@ class RunListConsumer(DirectDispatch, AsyncWebsocketConsumer):
         except Exception:
             log.exception("could not render the runs list")
             return
-        await self.send(html)
+        with contextlib.suppress(OSError):  # ClientDisconnected: the viewer left meanwhile
+            await self.send(html)
 
     def _render(self) -> str:
         user = self.scope["user"]

@@ -1,6 +1,8 @@
 """The websocket consumers: access checks, the log tail, the live lines, the state."""
 
 import asyncio
+import gc
+import logging
 import threading
 
 import pytest
@@ -8,6 +10,7 @@ from channels.db import database_sync_to_async
 from channels.layers import get_channel_layer
 from channels.testing import WebsocketCommunicator
 from django.contrib.auth.models import AnonymousUser, Group, User
+from uvicorn.protocols.utils import ClientDisconnected
 
 from programs.consumers import ConsoleConsumer, RunConsumer, RunListConsumer
 from programs.models import Program, Run
@@ -308,3 +311,66 @@ async def test_a_run_websocket_closes_once_its_viewer_may_no_longer_see_the_run(
     await get_channel_layer().group_send(run_group(run.pk), event)
     output = await comm.receive_output(2)
     assert output["type"] == "websocket.close", output
+
+
+class Errors(logging.Handler):
+    """The ERROR records of robotide's consumers' logger (caplog has none in async tests)."""
+
+    def __init__(self):
+        super().__init__(logging.ERROR)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record):
+        self.records.append(record)
+
+
+@pytest.fixture
+def consumer_errors():
+    handler = Errors()
+    logger = logging.getLogger("programs.consumers")
+    logger.addHandler(handler)
+    yield handler.records
+    logger.removeHandler(handler)
+
+
+def viewer_gone(monkeypatch, consumer):
+    """The consumer's sends fail as uvicorn's do once the viewer has closed its socket."""
+
+    async def send_to_closed(self, *args, **kwargs):
+        raise ClientDisconnected()
+
+    monkeypatch.setattr(consumer, "send", send_to_closed)
+
+
+async def test_a_viewer_leaving_as_the_state_comes_is_no_error(monkeypatch, consumer_errors):
+    """A run page closed while its state was rendered: the send fails, and that is the viewer
+    leaving (before: an ERROR with a traceback in the server's log)."""
+    alice, _, run = await make_run(b"o first\n")
+    comm = communicator(RunConsumer, f"/ws/runs/{run.pk}/", alice, run_id=run.pk)
+    assert (await comm.connect())[0]
+    await comm.receive_from()  # the tail
+    await comm.receive_from()  # the state
+    viewer_gone(monkeypatch, RunConsumer)
+    await get_channel_layer().group_send(run_group(run.pk), {"type": "run.state"})
+    await asyncio.sleep(0.5)  # the state's trip to the database thread, and its send
+    assert [r.getMessage() for r in consumer_errors] == []
+    await comm.disconnect()
+
+
+async def test_a_viewer_leaving_as_the_run_list_refreshes_is_no_error(monkeypatch):
+    alice, _, run = await make_run(b"")
+    comm = communicator(RunListConsumer, "/ws/runs/", alice)
+    assert (await comm.connect())[0]
+    monkeypatch.setattr("programs.consumers.LIST_REFRESH_INTERVAL", 0.0)
+    viewer_gone(monkeypatch, RunListConsumer)
+    await get_channel_layer().group_send(RUNS_GROUP, {"type": "runs.changed", "robot": "sim"})
+    loop = asyncio.get_running_loop()
+    unhandled = []
+    loop.set_exception_handler(lambda _loop, context: unhandled.append(context["message"]))
+    try:
+        await asyncio.sleep(0.5)
+        gc.collect()  # a task that failed unseen says so when it goes
+    finally:
+        loop.set_exception_handler(None)
+    assert unhandled == []
+    await comm.disconnect()
