@@ -26,13 +26,13 @@ SOURCE = "echo $EPOCHREALTIME\n"
 def drive(tree: str) -> None:
     """In a process of its own: this tree's appliance, one round per line on stdin."""
     sys.path.insert(0, tree)
-    from benchmarks.common import api_client, appliance, session_cookie
+    from benchmarks.common import api_client, appliance, browser_session
     from benchmarks.start_overhead import appliance_run, console_run, probe_connect
 
     names = ("get", "post", "console", "ws after", "ws open")
     rows: dict[str, list[float]] = {name: [] for name in names}
     with appliance("ab") as app:
-        http, cookie = api_client(app), session_cookie(app)
+        http, web = api_client(app), browser_session(app)
         program = app.create_program("ab", SOURCE, language="shell")["id"]
         ended = http.post(f"/api/programs/{program}/run", json={"robot": "sim"}).json()["id"]
         known: set[str] = {str(ended)}
@@ -52,11 +52,11 @@ def drive(tree: str) -> None:
                     time.sleep(0.01)
                 time.sleep(0.15)
             for _ in range(3):
-                rows["console"].append(console_run(app, http, cookie, program, known)["console"])
+                rows["console"].append(console_run(app, http, web, program, known)["console"])
                 time.sleep(0.05)
-                rows["ws after"].append(appliance_run(app, http, cookie, program, known)["ws"])
+                rows["ws after"].append(appliance_run(app, http, web, program, known)["ws"])
                 time.sleep(0.05)
-            rows["ws open"].append(probe_connect(app, http, cookie, ended)["first"])
+            rows["ws open"].append(probe_connect(app, http, web, ended)["first"])
             print("done", flush=True)
     print(json.dumps(rows), flush=True)
 

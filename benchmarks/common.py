@@ -159,6 +159,14 @@ def ws_connect(app: Appliance, path: str, cookie: str, timeout: float = 5.0):
     )
 
 
+def browser_session(app: Appliance):
+    """A signed-in client as a browser's page is: its session cookie, and the CSRF token its
+    unsafe requests carry (X-CSRFToken, as the pages' scripts send it)."""
+    client = app.session()
+    client.headers["X-CSRFToken"] = client.cookies["csrftoken"]
+    return client
+
+
 def session_cookie(app: Appliance) -> str:
     client = app.session()
     try:

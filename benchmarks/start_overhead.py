@@ -1,8 +1,9 @@
 """Program start overhead: Run request -> first output line, against the bare interpreter.
 
-Through the appliance: POST /api/programs/{id}/run, then at once the run's websocket
-(/ws/runs/{id}/, signed-in session cookie); the first output line counts whether it comes in
-the initial tail or in a later message. A thread watches the run's log file at the same time
+Through the appliance, as a browser does it: POST /api/programs/{id}/run with a signed-in
+session (and its CSRF token), then at once the run's websocket the answer names (``live``:
+/ws/runs/{id}/ with the session's pass, as the run's page has it); the first output line
+counts whether it comes in the initial tail or in a later message. A thread watches the run's log file at the same time
 for "request -> first line in the log file".
 
 Baseline, measured in the same run and interleaved with it: the same interpreter running the
@@ -44,13 +45,14 @@ from benchmarks.common import (
     Figure,
     api_client,
     appliance,
+    browser_session,
+    cookie_header,
     median,
     parse_api_time,
     percentile,
     print_table,
     runs_dir,
     say,
-    session_cookie,
     ws_connect,
 )
 from programs.languages import get_language
@@ -143,20 +145,22 @@ def program_time(text: str) -> float | None:
         return None
 
 
-def appliance_run(app, http, cookie: str, program_id: int, known: set[str]) -> dict:
+def appliance_run(app, http, web, program_id: int, known: set[str]) -> dict:
+    """The run's page's way: the request, then the websocket its answer names (``live``: with
+    the pass for this session, as the page that shows the run gets it)."""
     runs = runs_dir(app)
     watcher = LogWatcher(runs, set(known))  # a copy: the new run goes into `known` below
     watcher.start()
     wall0, t0 = time.time(), time.perf_counter()
-    response = http.post(f"/api/programs/{program_id}/run", json={"robot": "sim"})
+    response = web.post(f"/api/programs/{program_id}/run", json={"robot": "sim"})
     t_response = time.perf_counter()
     response.raise_for_status()
-    run_id = response.json()["id"]
+    run_id, live = response.json()["id"], response.json()["live"]
     known.add(str(run_id))
     t_ws = t_open = None
     in_tail = False
     try:
-        with ws_connect(app, f"/ws/runs/{run_id}/", cookie) as ws:
+        with ws_connect(app, live, cookie_header(web)) as ws:
             t_open = time.perf_counter()
             first = True
             deadline = t0 + RUN_TIMEOUT
@@ -194,12 +198,12 @@ def appliance_run(app, http, cookie: str, program_id: int, known: set[str]) -> d
     }
 
 
-def console_run(app, http, cookie: str, program_id: int, known: set[str]) -> dict:
+def console_run(app, http, web, program_id: int, known: set[str]) -> dict:
     """The workbench's way: its console websocket is open before the request, and the run
     comes on it (console.attach); the request is the same API call."""
-    with ws_connect(app, f"/ws/programs/{program_id}/console/", cookie) as ws:
+    with ws_connect(app, f"/ws/programs/{program_id}/console/", cookie_header(web)) as ws:
         t0 = time.perf_counter()
-        response = http.post(f"/api/programs/{program_id}/run", json={"robot": "sim"})
+        response = web.post(f"/api/programs/{program_id}/run", json={"robot": "sim"})
         response.raise_for_status()
         run_id = response.json()["id"]
         known.add(str(run_id))
@@ -241,16 +245,20 @@ def bare_run(argv: list[str], env: dict[str, str], cwd: str) -> dict:
     return {"first": t1 - t0, "statement": None if stmt is None else stmt - wall0}
 
 
-def probe_connect(app, http, cookie: str, run_id: int) -> dict:
-    """Costs with no program starting: an API GET, a websocket handshake + first message."""
+def probe_connect(app, http, web, run_id: int) -> dict:
+    """Costs with no program starting: an API GET, a websocket handshake + first message,
+    without a pass (access read first) and with one."""
     t0 = time.perf_counter()
-    http.get(f"/api/runs/{run_id}").raise_for_status()
+    live = web.get(f"/api/runs/{run_id}").json()["live"]
     t1 = time.perf_counter()
-    with ws_connect(app, f"/ws/runs/{run_id}/", cookie) as ws:
-        t2 = time.perf_counter()
-        ws.recv(timeout=RUN_TIMEOUT)
-        t3 = time.perf_counter()
-    return {"get": t1 - t0, "open": t2 - t1, "first": t3 - t1}
+    figures = {"get": t1 - t0}
+    for key, path in (("", f"/ws/runs/{run_id}/"), ("pass ", live)):
+        began = time.perf_counter()
+        with ws_connect(app, path, cookie_header(web)) as ws:
+            opened = time.perf_counter()
+            ws.recv(timeout=RUN_TIMEOUT)
+            figures |= {f"{key}open": opened - began, f"{key}first": time.perf_counter() - began}
+    return figures
 
 
 class BoxDriver:
@@ -341,8 +349,7 @@ def measure(work: Path) -> list[Figure]:
         drivers["rootless"] = rootless
     try:
         with appliance("start") as app:
-            http = api_client(app)
-            cookie = session_cookie(app)
+            http, web = api_client(app), browser_session(app)
             programs = {
                 name: app.create_program(f"bench start {name}", source, language=name)["id"]
                 for name, source in SOURCES.items()
@@ -365,15 +372,16 @@ def measure(work: Path) -> list[Figure]:
                             if i >= WARMUP:
                                 boxed.setdefault((who, name, stage), []).append(row)
                 for name, program_id in programs.items():
-                    row = appliance_run(app, http, cookie, program_id, known)
+                    row = appliance_run(app, http, web, program_id, known)
                     time.sleep(0.02)
-                    row.update(console_run(app, http, cookie, program_id, known))
+                    row.update(console_run(app, http, web, program_id, known))
                     if i >= WARMUP:
                         app_rows[name].append(row)
                     time.sleep(0.02)
             last = max(int(k) for k in known)
-            probes = [probe_connect(app, http, cookie, last) for _ in range(10)]
+            probes = [probe_connect(app, http, web, last) for _ in range(10)]
             http.close()
+            web.close()
     finally:
         for driver in drivers.values():
             driver.close()
@@ -386,9 +394,11 @@ def measure(work: Path) -> list[Figure]:
             )
         )
     for label, key in [
-        ("API GET /api/runs/{id} round trip", "get"),
+        ("API GET /api/runs/{id} round trip (session)", "get"),
         ("websocket open, existing run", "open"),
         ("websocket connect -> first message (log tail), existing run", "first"),
+        ("websocket open, existing run, with the API's pass", "pass open"),
+        ("websocket connect -> first message, existing run, with the API's pass", "pass first"),
     ]:
         figures.append(Figure(BENCH, f"{label}, median", stats(probes, key)[0] * MS, "ms"))
     return figures

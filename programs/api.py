@@ -11,7 +11,7 @@ from ninja.errors import HttpError
 from ninja.responses import Status
 from pydantic import field_validator, model_validator
 
-from programs import archive, outbound
+from programs import archive, outbound, watch_pass
 from programs.access import (
     EDIT,
     OWN,
@@ -125,9 +125,19 @@ class RunOut(Schema):
     started: datetime | None
     ended: datetime | None
 
+    live: str = Field(
+        "",
+        description="its live output: the path of a websocket sending HTML fragments; for a "
+        "caller signed in with a session, with a pass that opens it at once for 2 s",
+    )
+
     @staticmethod
     def resolve_queue_position(run: Run) -> int | None:
         return run.queue_rank
+
+    @staticmethod
+    def resolve_live(run: Run, context) -> str:
+        return watch_pass.live_path(run, context["request"])
 
 
 class QueueMoveIn(Body):

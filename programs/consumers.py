@@ -13,8 +13,17 @@ from django.template.loader import render_to_string
 from django.utils.html import escape
 from django.utils.translation import ngettext
 
+from programs import watch_pass
 from programs.access import get_program_for_user, get_run_for_user
-from programs.runlog import count_lines_between, lines_after, places_in, render_lines, tail
+from programs.models import Run
+from programs.runlog import (
+    count_lines_between,
+    lines_after,
+    places_for,
+    places_in,
+    render_lines,
+    tail,
+)
 from programs.views import run_tables_context
 from robotide.consumers import DirectDispatch
 from robotide.security import plain_number
@@ -46,13 +55,17 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
     async def connect(self):
         run_id = self.scope["url_route"]["kwargs"]["run_id"]
         page_offset = shown_up_to(self.scope)  # read before joining: nothing to undo if bad
+        given = watch_pass.read(query_param(self.scope, "pass"), run_id, session_key(self.scope))
         # Join first, then read the file: lines already in it are skipped by offset. Nothing
         # of the group reaches a viewer who may not see the run: its events wait for
         # connect() to return, and then it has left the group.
         self.group = run_group(run_id)
         await self.channel_layer.group_add(self.group, self.channel_name)
         try:
-            first = await self.see_run(run_id, page_offset)
+            if given is not None:  # no database trip: access is read in full behind it
+                first = self.seen_on_pass(given, page_offset)
+            else:
+                first = await self.see_run(run_id, page_offset)
         except BaseException:  # leave no member behind in the run's group
             await self.leave_run_group()
             raise
@@ -62,7 +75,10 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
             return
         await self.accept()
         await self.send(first)
-        await self.send_status()
+        if given is not None:
+            await self.run_state({})  # reads the run, and whether the viewer may still see it
+        else:
+            await self.send_status()
 
     async def leave_run_group(self):
         await self.channel_layer.group_discard(self.group, self.channel_name)
@@ -74,8 +90,16 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
             self.run = get_run_for_user(self.scope["user"], run_id)
         except Http404:
             return None
+        self.run_id, self.log_path = run_id, self.run.log_path
         self.place_of = places_in(self.run)
         self.checked = time.monotonic()
+        return self.catch_up(page_offset)
+
+    def seen_on_pass(self, given: watch_pass.WatchPass, page_offset: int | None) -> str:
+        """What the page lacks of the log, on the access its pass stands for."""
+        self.run_id, self.log_path = given.run_id, Run.log_path_of(given.run_id)
+        self.place_of = places_for(given.language, given.program_name)
+        self.checked = time.monotonic() - given.age
         return self.catch_up(page_offset)
 
     @database_sync_to_async
@@ -83,7 +107,7 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
         """Access read again (at most every ACCESS_RECHECK_SECONDS, as output comes)."""
         self.checked = time.monotonic()
         try:
-            get_run_for_user(self.scope["user"], self.run.pk)
+            get_run_for_user(self.scope["user"], self.run_id)
         except Http404:
             return False
         return True
@@ -94,12 +118,12 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
     def catch_up(self, page_offset: int | None) -> str:
         """What the page lacks: the lines after those it was rendered with, else a new tail."""
         if page_offset is not None:
-            lines, end = lines_after(self.run.log_path, page_offset)
+            lines, end = lines_after(self.log_path, page_offset)
             if lines is not None:
                 self.offset = end
                 html = render_lines(lines, self.place_of)
                 return f'<div id="log-lines" hx-swap-oob="beforeend">{html}</div>'
-        lines, skipped, self.offset = tail(self.run.log_path)
+        lines, skipped, self.offset = tail(self.log_path)
         head = skipped_line(skipped) if skipped else ""
         return f'<div id="log-lines">{head}{render_lines(lines, self.place_of)}</div>'
 
@@ -124,7 +148,7 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
         if skipped and event["skipped_from"] < self.offset:
             # Part of the gap was in the log tail this viewer got first: count what it missed.
             skipped = await asyncio.to_thread(
-                count_lines_between, self.run.log_path, self.offset, fresh[0][0]
+                count_lines_between, self.log_path, self.offset, fresh[0][0]
             )
         head = skipped_line(skipped) if skipped else ""
         html = render_lines([(tag, text) for _number, tag, text in fresh], self.place_of)
@@ -151,16 +175,17 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
         except OSError:  # uvicorn's ClientDisconnected: the viewer left meanwhile
             return
         except Exception:
-            log.exception("run %s: could not send its state", self.run.pk)
+            log.exception("run %s: could not send its state", self.run_id)
 
     @database_sync_to_async
     def fresh_status(self) -> str | None:
         """The run as it is now, rendered: one trip to a worker thread (a start's first lines
         come while it is made)."""
         try:
-            self.run = get_run_for_user(self.scope["user"], self.run.pk)
+            self.run = get_run_for_user(self.scope["user"], self.run_id)
         except Http404:
             return None
+        self.checked = time.monotonic()
         return self.status_html()
 
     def status_html(self) -> str:
@@ -269,6 +294,12 @@ class RunListConsumer(DirectDispatch, AsyncWebsocketConsumer):
 def query_param(scope, name: str) -> str | None:
     values = parse_qs(scope["query_string"].decode(errors="replace")).get(name)
     return values[0] if values else None
+
+
+def session_key(scope) -> str | None:
+    """The session key the websocket's cookie names (read without the database)."""
+    session = scope.get("session")
+    return session.session_key if session is not None else None
 
 
 def shown_up_to(scope) -> int | None:

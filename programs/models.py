@@ -214,7 +214,12 @@ class Run(models.Model):
 
     @property
     def log_path(self) -> Path:
-        return self.directory / "output.log"
+        return self.log_path_of(self.pk)
+
+    @staticmethod
+    def log_path_of(run_id: int) -> Path:
+        """Where run ``run_id`` logs, known without reading it (programs.watch_pass)."""
+        return settings.RUNS_DIR / str(run_id) / "output.log"
 
     @property
     def duration(self):

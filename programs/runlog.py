@@ -7,6 +7,7 @@ from pathlib import Path
 from django.utils.html import escape
 
 from programs.error_lines import error_place
+from programs.models import program_filename
 
 TAIL_LINES = 2000
 DOWNLOAD_CHUNK = 256 * 1024
@@ -99,11 +100,21 @@ def render_lines(lines, place_of: Callable[[str], int | None] | None = None) -> 
 
 def places_in(run) -> Callable[[str], int | None]:
     """What line of ``run``'s program an output line points at, if any."""
+    return places_for(run.language, run.program_name)
+
+
+def places_for(language: str, program_name: str) -> Callable[[str], int | None]:
+    """What line of the program an output line points at, if any: known from its language and
+    name alone (programs.watch_pass)."""
+    try:
+        program_file = program_filename(program_name, language)
+    except ValueError:  # a language this robotide no longer has
+        return lambda _text: None
 
     def place_of(text: str) -> int | None:
         try:
-            found = error_place(run.language, text, run.program_file)
-        except (ValueError, LookupError):  # a language this robotide no longer has
+            found = error_place(language, text, program_file)
+        except (ValueError, LookupError):
             return None
         return found.line if found else None
 

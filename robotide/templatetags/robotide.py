@@ -6,6 +6,8 @@ from django.utils.formats import get_format
 from django.utils.safestring import mark_safe
 from django.utils.translation import gettext as _
 
+from programs import watch_pass
+
 register = template.Library()
 
 
@@ -55,3 +57,9 @@ def sanitized(html: str) -> str:
     """Staff-written HTML (a page) with scripts, event handlers, styles and javascript: links
     removed: safe to show even if the strict CSP were not there."""
     return mark_safe(nh3.clean(str(html)))
+
+
+@register.simple_tag(takes_context=True)
+def run_live(context, run, shown_up_to=None) -> str:
+    """The run's websocket path for this page: its viewer's pass, the log offset shown."""
+    return watch_pass.live_path(run, context.get("request"), shown_up_to)

@@ -9,9 +9,12 @@ import pytest
 from channels.db import database_sync_to_async
 from channels.layers import get_channel_layer
 from channels.testing import WebsocketCommunicator
+from django.contrib.auth import SESSION_KEY
 from django.contrib.auth.models import AnonymousUser, Group, User
+from django.contrib.sessions.backends.db import SessionStore
 from uvicorn.protocols.utils import ClientDisconnected
 
+from programs import watch_pass
 from programs.consumers import ConsoleConsumer, RunConsumer, RunListConsumer
 from programs.models import Program, Run
 from robotide.models import ClassTeacher
@@ -374,3 +377,68 @@ async def test_a_viewer_leaving_as_the_run_list_refreshes_is_no_error(monkeypatc
         loop.set_exception_handler(None)
     assert unhandled == []
     await comm.disconnect()
+
+
+@database_sync_to_async
+def session_of(user) -> SessionStore:
+    """A signed-in browser session of ``user``, as the websocket's cookie names it."""
+    session = SessionStore()
+    session[SESSION_KEY] = str(user.pk)
+    session.create()
+    return SessionStore(session_key=session.session_key)
+
+
+async def with_pass(user, run, session=None):
+    """A run websocket opened with a pass given to ``session`` (the user's own by default)."""
+    session = session or await session_of(user)
+    given = watch_pass.give(run, session.session_key)
+    comm = communicator(RunConsumer, f"/ws/runs/{run.pk}/?pass={given}", user, run_id=run.pk)
+    comm.scope["session"] = session
+    return comm
+
+
+async def test_a_pass_opens_the_log_while_the_database_thread_is_busy():
+    """A start's run page: its websocket sends the log on the pass, without waiting for the
+    thread that writes the start's claim and state (before: it waited for three queries)."""
+    alice, _, run = await make_run(b"o first\n")
+    comm = await with_pass(alice, run)
+    busy, release = threading.Event(), threading.Event()
+
+    def database_work():
+        busy.set()
+        release.wait(30)
+
+    work = asyncio.ensure_future(database_sync_to_async(database_work)())
+    try:
+        await asyncio.to_thread(busy.wait, 10)
+        connected, _ = await comm.connect(timeout=5)
+        assert connected
+        assert await comm.receive_from(timeout=5) == (
+            '<div id="log-lines"><div class="ln o">first</div></div>'
+        )
+    finally:
+        release.set()
+        await work
+    assert 'id="run-status"' in await comm.receive_from()  # then its state, read in full
+    await comm.disconnect()
+
+
+async def test_another_sessions_pass_opens_nothing():
+    alice, bob, run = await make_run(b"o secret\n")
+    alices = watch_pass.give(run, (await session_of(alice)).session_key)
+    comm = communicator(RunConsumer, f"/ws/runs/{run.pk}/?pass={alices}", bob, run_id=run.pk)
+    comm.scope["session"] = await session_of(bob)
+    connected, code = await comm.connect()
+    assert not connected and code == 4404
+
+
+async def test_a_pass_stands_only_until_access_is_read_in_full():
+    """A teacher whose class was taken from them after the page was shown: the pass's log
+    tail, then the close, as the state is read (and no line after)."""
+    alice, _, run = await make_run(b"o first\n")
+    teacher = await database_sync_to_async(teacher_of)(alice)
+    comm = await with_pass(teacher, run)
+    await database_sync_to_async(ClassTeacher.objects.filter(user=teacher).delete)()
+    assert (await comm.connect())[0]
+    assert "first" in await comm.receive_from()
+    assert (await comm.receive_output(2))["type"] == "websocket.close"
