@@ -3,8 +3,8 @@
 Through the appliance, as a browser does it: POST /api/programs/{id}/run with a signed-in
 session (and its CSRF token), then at once the run's websocket the answer names (``live``:
 /ws/runs/{id}/ with the session's pass, as the run's page has it); the first output line
-counts whether it comes in the initial tail or in a later message. A thread watches the run's log file at the same time
-for "request -> first line in the log file".
+counts whether it comes in the initial tail or in a later message. A thread watches the run's
+log file at the same time for "request -> first line in the log file".
 
 Baseline, measured in the same run and interleaved with it: the same interpreter running the
 same program file from this process (spawn -> first line read on a pipe), and the launcher's
