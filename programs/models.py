@@ -339,18 +339,14 @@ class Run(models.Model):
     # -- state changes made by the robot agent ------------------------------------------------
 
     @classmethod
-    def mark_running(cls, run_id: int, pid: int) -> None:
-        cls.objects.filter(pk=run_id, state=cls.State.STARTING).update(
-            state=cls.State.RUNNING, pid=pid, started=timezone.now()
-        )
-
-    @classmethod
-    def claim(cls, run_id: int) -> bool:
-        """The agent takes a run that waits to start; False if it no longer waits."""
-        return (
-            cls.objects.filter(pk=run_id, state=cls.State.STARTING, pid__isnull=True).update(pid=0)
-            == 1
-        )
+    def claim(cls, run_id: int, running_pid: int | None = None) -> bool:
+        """The agent takes a run that waits to start; False if it no longer waits. With its
+        program's pid (the program under way), marked running in the same write."""
+        waiting = cls.objects.filter(pk=run_id, state=cls.State.STARTING, pid__isnull=True)
+        if running_pid is None:
+            return waiting.update(pid=0) == 1
+        running = {"state": cls.State.RUNNING, "pid": running_pid, "started": timezone.now()}
+        return waiting.update(**running) == 1
 
     @classmethod
     def mark_ended(cls, run_id: int, state: str, exit_code: int | None, reason: str) -> None:

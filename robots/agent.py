@@ -104,6 +104,14 @@ class ActiveRun:
                 await asyncio.shield(self.claimed)
         return self.confirmed_now()
 
+    def disowned(self) -> bool:
+        """Its claim was answered no: it was lost or failed meanwhile, its end is not ours
+        to record (a claim that could not be asked is no answer)."""
+        claim = self.claimed
+        if claim is None or not claim.done() or claim.cancelled() or claim.exception():
+            return False
+        return not claim.result()
+
 
 class RobotAgent:
     def __init__(self, name: str):
@@ -416,19 +424,20 @@ class RobotAgent:
         if await self.queue.waits(message):  # the robot is busy: it waits its turn
             return
         # Only a run still waiting to start: not one marked lost or failed meanwhile. Asked
-        # while its box is given the program, which does not wait for the answer (a database
-        # round trip, on the agents' busy thread): its token and its MAVLink endpoint do
-        # (ActiveRun.confirmed), and a no ends it.
-        claimed = asyncio.ensure_future(database_sync_to_async(Run.claim)(run_id))
+        # once its box has the program, in the write that marks it running: one database trip,
+        # not two, while its first lines go out. The program does not wait for the answer;
+        # its token and its MAVLink endpoint do (ActiveRun.confirmed), and a no ends it.
+        claimed = asyncio.get_running_loop().create_future()
         try:
             active = await self._launch(run_id, message, claimed, partial(self._may_start, run_id))
         except (
             LanguageUnavailable, launcher.LauncherUnavailable, IsolationUnavailable,
             ValueError, OSError,
         ) as exc:  # fmt: skip
-            if await claimed:
+            if await database_sync_to_async(Run.claim)(run_id):
                 await self._end_run(run_id, "failed", None, f"could not start: {exc}")
             return
+        await self._claim(active)
         if not await active.confirmed():
             if claimed.exception() is not None:
                 log.error("agent %s: run %s could not be claimed", self.name, run_id,
@@ -439,8 +448,17 @@ class RobotAgent:
                 active.process.kill("it no longer waited to start", NOT_OURS)
             return
         if active.process.started:
-            await database_sync_to_async(Run.mark_running)(run_id, active.process.pid)
             self._run_changed(run_id)
+
+    async def _claim(self, active: ActiveRun) -> None:
+        """The run's claim answered, and the run marked running if its program started."""
+        pid = active.process.pid if active.process.started else None
+        try:
+            active.claimed.set_result(
+                await database_sync_to_async(Run.claim)(active.run_id, running_pid=pid)
+            )
+        except Exception as exc:  # said where the answer is read
+            active.claimed.set_exception(exc)
 
     async def _may_start(self, run_id: int) -> tuple[str, str] | None:
         """The gate of a run's box: None lets its program run."""
@@ -592,7 +610,9 @@ class RobotAgent:
         if self.lease.release(active.run_id):
             self._lease_changed()
         await active.process.box.close()
-        if outcome.state != NOT_OURS:  # else lost or failed meanwhile: its state stays
+        # After its claim (a program may end before the answer): marked running, then ended.
+        await active.confirmed()
+        if outcome.state != NOT_OURS and not active.disowned():  # else its state stays
             await self._end_run(active.run_id, outcome.state, outcome.exit_code, outcome.reason)
         if not self.runs:  # the robot's next run finds its box made
             self._box_ahead(now=True)

@@ -32,9 +32,9 @@ def held_claim(monkeypatch):
     let_go = threading.Event()
     claim = Run.claim
 
-    def held(run_id):
+    def held(run_id, **how):
         let_go.wait(30)
-        return claim(run_id)
+        return claim(run_id, **how)
 
     monkeypatch.setattr(Run, "claim", held)
     yield let_go

@@ -30,9 +30,9 @@ time.sleep(30)
 """
 
 
-async def start(run: Run) -> None:
+async def start(run: Run, source: str = PROGRAM) -> None:
     """The web tier's run.start for `run`."""
-    message = {"type": "run.start", "run_id": run.pk, "language": "python", "source": PROGRAM,
+    message = {"type": "run.start", "run_id": run.pk, "language": "python", "source": source,
                "filename": "main.py", "args": [], "user": "mallory"}  # fmt: skip
     await get_channel_layer().send(agent_channel("sim"), message)
 
@@ -96,3 +96,20 @@ async def test_a_claim_answered_no_ends_the_program_before_the_robot_is_its(sim_
     assert sim_agent.lease.holder is None and await velocity(sim_agent) == 0
     await database_sync_to_async(run.refresh_from_db)()
     assert (run.state, run.reason) == (Run.State.FAILED, "gone")  # its state stays
+
+
+async def test_a_program_that_ends_before_its_claim_is_recorded_as_ran_then_ended(
+    sim_agent, held_claim
+):
+    """Its end waits for the claim's answer: marked running (with when), then finished
+    (before, its end came first, and the claim then found it no longer waiting: a finished
+    run that never started)."""
+    run = await a_run_waiting_to_start()
+    await start(run, 'print("bye", flush=True)\n')
+    await until(lambda: "o bye" in log_of(run))
+    await asyncio.sleep(0.5)  # its end meanwhile: not recorded before the claim's answer
+    # Read aside: the database thread is the held claim's.
+    assert await asyncio.to_thread(lambda: Run.objects.get(pk=run.pk).state) == "starting"
+    held_claim.set()
+    await until_async(lambda: state_of(run), Run.State.FINISHED)
+    assert run.started is not None and run.exit_code == 0
