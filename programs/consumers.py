@@ -31,8 +31,8 @@ from robotide.ws_user import user_of
 from robots.bus import RUNS_GROUP, console_group, run_group
 
 LIST_REFRESH_INTERVAL = 0.5
-# How long a viewer's access stands before output it is sent makes it read again.
-ACCESS_RECHECK_SECONDS = 2.0
+# How long a viewer's access stands before what it is sent (output, a state) makes it read again.
+ACCESS_RECHECK_SECONDS = watch_pass.ACCESS_STANDS_SECONDS
 log = logging.getLogger(__name__)
 
 
@@ -180,12 +180,16 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
     @database_sync_to_async
     def fresh_status(self) -> str | None:
         """The run as it is now, rendered: one trip to a worker thread (a start's first lines
-        come while it is made)."""
+        come while it is made); the viewer's access read again if it no longer stands (the
+        session and the user, on a pass: not while the run's first lines go out)."""
         try:
-            self.run = get_run_for_user(self.scope["user"], self.run_id)
-        except Http404:
+            if time.monotonic() - self.checked < ACCESS_RECHECK_SECONDS:
+                self.run = Run.objects.select_related("robot", "owner").get(pk=self.run_id)
+            else:
+                self.run = get_run_for_user(self.scope["user"], self.run_id)
+                self.checked = time.monotonic()
+        except (Http404, Run.DoesNotExist):
             return None
-        self.checked = time.monotonic()
         return self.status_html()
 
     def status_html(self) -> str:

@@ -432,9 +432,10 @@ async def test_another_sessions_pass_opens_nothing():
     assert not connected and code == 4404
 
 
-async def test_a_pass_stands_only_until_access_is_read_in_full():
+async def test_a_pass_stands_only_until_access_is_read_in_full(monkeypatch):
     """A teacher whose class was taken from them after the page was shown: the pass's log
-    tail, then the close, as the state is read (and no line after)."""
+    tail, then the close, as the state is read once their access no longer stands."""
+    monkeypatch.setattr("programs.consumers.ACCESS_RECHECK_SECONDS", 0.0)
     alice, _, run = await make_run(b"o first\n")
     teacher = await database_sync_to_async(teacher_of)(alice)
     comm = await with_pass(teacher, run)
