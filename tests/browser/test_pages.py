@@ -175,6 +175,8 @@ def test_output_streams_live_and_stop_ends_the_run(page, appliance, screenshot):
     run_id = run_id_of(page)
     expect(page.locator("#run-status .state")).to_have_text("running")
     mark_page(page)
+    # The page's websocket opens on the pass it was rendered with (programs.watch_pass).
+    assert "pass=" in page.locator("[ws-connect]").first.get_attribute("ws-connect")
 
     lines = page.locator("#log-lines .ln.o")
     expect(lines.nth(2)).to_be_visible()
