@@ -76,7 +76,7 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
         await self.accept()
         await self.send(first)
         if given is not None:
-            await self.run_state({})  # reads the run, and whether the viewer may still see it
+            await self.run_state({})  # the run's state, read now: the page's may be older
         else:
             await self.send_status()
 

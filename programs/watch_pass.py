@@ -3,14 +3,15 @@
 The run's page and the API's answer about a run (a start's, above all) checked the viewer's
 access a moment before. The websocket the viewer opens next may send the log on that check
 instead of reading the session, the user and the run again first: three queries on the thread
-all database work waits for, while a start writes its claim and its state, and a start's first
-line waited for them.
+all database work waits for, while a start writes its state, and a start's first line waited
+for them.
 
 A pass is signed with the server's secret and names the run and what its lines are rendered
 with (language, program name: a pass is read without the database). It holds only for the
 browser session it was given to (a digest of the session key: the URL may end up in a log, the
 key must not) and for ACCESS_STANDS_SECONDS, the time any websocket's access read stands: the
-consumer then reads access in full at once, and closes if it is gone.
+consumer reads access in full once that has passed, before it sends anything more, and closes
+if it is gone.
 """
 
 import time

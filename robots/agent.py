@@ -100,8 +100,13 @@ class ActiveRun:
     async def confirmed(self) -> bool:
         """Its claim's answer, waited for (a claim that failed is a no)."""
         if self.claimed is not None and not self.claimed.done():
-            with contextlib.suppress(Exception):
+            try:
                 await asyncio.shield(self.claimed)
+            except asyncio.CancelledError:
+                if not self.claimed.cancelled():
+                    raise  # the waiter's own cancellation, not the claim's
+            except Exception:
+                pass
         return self.confirmed_now()
 
     def disowned(self) -> bool:
@@ -454,11 +459,14 @@ class RobotAgent:
         """The run's claim answered, and the run marked running if its program started."""
         pid = active.process.pid if active.process.started else None
         try:
-            active.claimed.set_result(
-                await database_sync_to_async(Run.claim)(active.run_id, running_pid=pid)
-            )
+            answer = await database_sync_to_async(Run.claim)(active.run_id, running_pid=pid)
         except Exception as exc:  # said where the answer is read
             active.claimed.set_exception(exc)
+        else:
+            active.claimed.set_result(answer)
+        finally:
+            if not active.claimed.done():  # cancelled on its way: no answer, nobody waits
+                active.claimed.cancel()
 
     async def _may_start(self, run_id: int) -> tuple[str, str] | None:
         """The gate of a run's box: None lets its program run."""

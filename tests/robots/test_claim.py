@@ -113,3 +113,16 @@ async def test_a_program_that_ends_before_its_claim_is_recorded_as_ran_then_ende
     held_claim.set()
     await until_async(lambda: state_of(run), Run.State.FINISHED)
     assert run.started is not None and run.exit_code == 0
+
+
+async def test_a_claim_cancelled_on_its_way_is_no_answer_and_holds_nobody():
+    """The start's task cancelled during the claim's trip (the agent shutting down): whoever
+    waits for the answer gets a no and goes on (the run's end is still recorded)."""
+    from robots.agent import ActiveRun
+
+    active = ActiveRun(1, "token", process=None, claimed=asyncio.get_running_loop().create_future())
+    waiter = asyncio.ensure_future(active.confirmed())
+    await asyncio.sleep(0)
+    active.claimed.cancel()
+    assert await asyncio.wait_for(waiter, 2) is False
+    assert not active.disowned()
