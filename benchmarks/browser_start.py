@@ -1,7 +1,9 @@
 """A start as a user's browser sees it: Debian's chromium, signed in, makes the request in the
-page (``fetch`` POST /api/programs/{id}/run), then opens the run's websocket at once and
-waits for the first output line, timed with ``performance.now()`` (start_overhead's
-"websocket after", with the browser as the client instead of httpx and websockets).
+page (``fetch`` POST /api/programs/{id}/run with its session and the page's CSRF token, as the
+page's own scripts send it), then opens the websocket the answer names (``live``, with the
+session's pass) at once and waits for the first output line, timed with ``performance.now()``
+(start_overhead's "websocket after", with the browser as the client instead of httpx and
+websockets).
 
 Baselines in the same page and run: a GET /healthz round trip and a websocket opened on an
 ended run until its first message (the log tail): what the browser and the web tier cost
@@ -20,18 +22,21 @@ BENCH = "browser start"
 ROUNDS, WARMUP = 20, 2
 SOURCES = {"python": "import time; print(time.time())\n", "shell": "echo $EPOCHREALTIME\n"}
 
-# -> [response, websocket open, first line] in ms after the request; `run` null: a new run.
-START = """async ([id, token, run]) => {
+# -> [response, websocket open, first line, run] in ms after the request; `run` null: a new
+# run, else a websocket (without a pass) on that one.
+START = """async ([id, run]) => {
+  const csrf = JSON.parse(document.body.getAttribute("hx-headers"))["X-CSRFToken"];
   const t0 = performance.now();
+  let live = `/ws/runs/${run}/`;
   if (run === null) {
     const r = await fetch(`/api/programs/${id}/run`, {method: "POST",
-      headers: {"Authorization": `Bearer ${token}`, "Content-Type": "application/json"},
+      headers: {"X-CSRFToken": csrf, "Content-Type": "application/json"},
       body: JSON.stringify({robot: "sim"})});
-    run = (await r.json()).id;
+    ({id: run, live} = await r.json());
   }
   const t1 = performance.now();
   return await new Promise((done, failed) => {
-    const ws = new WebSocket(`ws://${location.host}/ws/runs/${run}/`);
+    const ws = new WebSocket(`ws://${location.host}${live}`);
     let opened;
     ws.onopen = () => { opened = performance.now(); };
     ws.onmessage = (e) => {
@@ -67,14 +72,14 @@ def run() -> list[Figure]:
         ended = None
         for i in range(WARMUP + ROUNDS):
             for name, program in programs.items():
-                row = page.evaluate(START, [program, app.token, None])
+                row = page.evaluate(START, [program, None])
                 page.wait_for_timeout(200)  # the run ends, its robot's next box is made
                 if i >= WARMUP:
                     rows[name].append(row)
                 ended = row[3]
             if i >= WARMUP:
                 healthz.append(page.evaluate(HEALTHZ))
-                ended_open.append(page.evaluate(START, [None, app.token, ended])[2])
+                ended_open.append(page.evaluate(START, [None, ended])[2])
         browser.close()
     say(f"[{BENCH}] {rows}")
     figures = []
