@@ -1,6 +1,7 @@
 """The websocket consumers: access checks, the log tail, the live lines, the state."""
 
 import asyncio
+import contextlib
 import gc
 import logging
 import threading
@@ -77,14 +78,9 @@ async def test_the_run_stream_starts_with_the_log_and_skips_what_it_already_sent
     await comm.disconnect()
 
 
-async def test_a_line_reaches_the_viewer_while_the_database_thread_is_busy():
-    # A start's first line comes while its claim and its state are written, in the one
-    # thread that does database work: handling the line must not wait for that thread.
-    alice, _, run = await make_run(b"")
-    comm = communicator(RunConsumer, f"/ws/runs/{run.pk}/", alice, run_id=run.pk)
-    assert (await comm.connect())[0]
-    await comm.receive_from()  # the (empty) tail
-    await comm.receive_from()  # the state
+@contextlib.asynccontextmanager
+async def database_thread_busy():
+    """The one thread that does database work, held by other work until the block ends."""
     busy, release = threading.Event(), threading.Event()
 
     def database_work():
@@ -94,14 +90,26 @@ async def test_a_line_reaches_the_viewer_while_the_database_thread_is_busy():
     work = asyncio.ensure_future(database_sync_to_async(database_work)())
     try:
         await asyncio.to_thread(busy.wait, 10)
+        yield
+    finally:
+        release.set()
+        await work
+
+
+async def test_a_line_reaches_the_viewer_while_the_database_thread_is_busy():
+    # A start's first line comes while its state is written, in the one thread that does
+    # database work: handling the line must not wait for that thread.
+    alice, _, run = await make_run(b"")
+    comm = communicator(RunConsumer, f"/ws/runs/{run.pk}/", alice, run_id=run.pk)
+    assert (await comm.connect())[0]
+    await comm.receive_from()  # the (empty) tail
+    await comm.receive_from()  # the state
+    async with database_thread_busy():
         lines = [[0, "o", "first"]]
         await get_channel_layer().group_send(
             run_group(run.pk), {"type": "run.output", "run_id": run.pk, "lines": lines}
         )
         assert "first" in await comm.receive_from(timeout=10)
-    finally:
-        release.set()
-        await work
     await comm.disconnect()
 
 
@@ -399,27 +407,16 @@ async def with_pass(user, run, session=None):
 
 async def test_a_pass_opens_the_log_while_the_database_thread_is_busy():
     """A start's run page: its websocket sends the log on the pass, without waiting for the
-    thread that writes the start's claim and state (before: it waited for three queries)."""
+    thread that writes the start's state (before: it waited for three queries)."""
     alice, _, run = await make_run(b"o first\n")
     comm = await with_pass(alice, run)
-    busy, release = threading.Event(), threading.Event()
-
-    def database_work():
-        busy.set()
-        release.wait(30)
-
-    work = asyncio.ensure_future(database_sync_to_async(database_work)())
-    try:
-        await asyncio.to_thread(busy.wait, 10)
+    async with database_thread_busy():
         connected, _ = await comm.connect(timeout=5)
         assert connected
         assert await comm.receive_from(timeout=5) == (
             '<div id="log-lines"><div class="ln o">first</div></div>'
         )
-    finally:
-        release.set()
-        await work
-    assert 'id="run-status"' in await comm.receive_from()  # then its state, read in full
+    assert 'id="run-status"' in await comm.receive_from()  # then its state
     await comm.disconnect()
 
 
