@@ -155,7 +155,8 @@ def appliance_run(app, http, web, program_id: int, known: set[str]) -> dict:
     response = web.post(f"/api/programs/{program_id}/run", json={"robot": "sim"})
     t_response = time.perf_counter()
     response.raise_for_status()
-    run_id, live = response.json()["id"], response.json()["live"]
+    answer = response.json()
+    run_id, live = answer["id"], answer["live"]
     known.add(str(run_id))
     t_ws = t_open = None
     in_tail = False
