@@ -37,7 +37,6 @@ import logging
 import math
 import os
 import re
-import resource
 import shutil
 import stat
 import sys
@@ -53,7 +52,7 @@ import rhal
 from robots.models import Robot
 from robots.rpc import ROBOT_ERROR, RpcError, bind_params
 from runbox import SYSTEM_PATH
-from runbox.isolation import InForce
+from runbox.isolation import InForce, tool
 
 MAX_SAY_CHARS = 500
 MAX_SAY_WAITING = 8  # utterances queued behind the one being spoken
@@ -528,9 +527,9 @@ async def hear(
     for what the program gave wrong."""
     request = {"phrases": list(phrases), "check": check, "recording": recording}
     process = await asyncio.create_subprocess_exec(
-        sys.executable, "-I", str(HEARING),
+        *hearing_command(),
         stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.PIPE, env=HEARING_ENV, preexec_fn=_hearing_limits,
+        stderr=asyncio.subprocess.PIPE, env=HEARING_ENV,
         pass_fds=() if recording is None else (recording,),
     )  # fmt: skip
     try:
@@ -560,13 +559,15 @@ async def hear(
     return answer
 
 
-def _hearing_limits() -> None:
-    """In the recogniser's process before it starts: its memory and CPU, and a lower
-    priority than the server's."""
-    resource.setrlimit(resource.RLIMIT_AS, (HEARING_MEMORY, HEARING_MEMORY))
-    cpu = int(HEARING_SECONDS)
-    resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu))
-    os.nice(10)
+def hearing_command() -> list[str]:
+    """The recogniser with its memory and CPU limits and a lower priority than the server's,
+    set by util-linux's prlimit and coreutils' nice (no code between fork and exec in this
+    process, whose other threads may hold locks)."""
+    limits = [f"--as={HEARING_MEMORY}", f"--cpu={int(HEARING_SECONDS)}"]
+    return [
+        tool("prlimit"), *limits, "--", tool("nice"), "-n", "10",
+        sys.executable, "-I", str(HEARING),
+    ]  # fmt: skip
 
 
 def _no_sound_card() -> str:

@@ -7,6 +7,8 @@ import asyncio
 import base64
 import io
 import json
+import os
+import re
 import subprocess
 import sys
 import time
@@ -491,6 +493,43 @@ async def test_hearing_a_long_recording_does_not_hold_up_the_server(agent, bot, 
     heard = await hearing
     assert isinstance(heard["text"], str)
     assert max(gaps) < 0.5, f"the loop stood still for {max(gaps):.2f} s"
+
+
+HEARD = str(host_services.HEARING).encode()
+
+
+def hearing_processes() -> list[int]:
+    """This process's children running the recogniser (robots/hearing.py), once it is the
+    interpreter (past the tools that set its limits)."""
+    found = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+            ppid = int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+        except (OSError, IndexError, ValueError):
+            continue
+        if ppid == os.getpid() and argv[0] == sys.executable.encode() and argv[-2:-1] == [HEARD]:
+            found.append(int(pid))
+    return found
+
+
+async def test_the_recogniser_hears_within_its_memory_cpu_and_priority(agent, bot, workdir):
+    """Its process has the address space, CPU seconds and niceness host_services names
+    (1 GB, 120 s, 10 below the server), set before it runs anything."""
+    noise = np.random.default_rng(2).integers(-12000, 12000, 6 * 16000, dtype="<i2")
+    write_wav(workdir / "noise.wav", noise.tobytes(), 16000)
+    hearing = asyncio.ensure_future(bot.call("listen", None, "noise.wav"))
+    deadline = time.monotonic() + 10
+    while not (found := hearing_processes()) and not hearing.done():
+        assert time.monotonic() < deadline, "no recogniser process seen"
+        await asyncio.sleep(0.01)
+    assert found, "the recording was heard before its process was seen"
+    limits = Path(f"/proc/{found[0]}/limits").read_text()
+    stat = Path(f"/proc/{found[0]}/stat").read_text().rsplit(")", 1)[1].split()
+    await hearing
+    assert re.search(rf"Max address space\s+{host_services.HEARING_MEMORY}\s", limits), limits
+    assert re.search(r"Max cpu time\s+120\s+120\s", limits), limits
+    assert int(stat[16]) == os.getpriority(os.PRIO_PROCESS, 0) + 10  # its nice value
 
 
 async def test_large_recordings_at_once_stay_out_of_the_servers_memory(agent, workdir):
