@@ -102,23 +102,14 @@ class Policy:
                 " (apt-get install bubblewrap)"
             )
         if self.network == "full":
-            for name, package in (("slirp4netns", "slirp4netns"), ("ip", "iproute2")):
-                if shutil.which(name, path=TOOLS_PATH) is None:
-                    raise IsolationUnavailable(
-                        f"network 'full' needs {name} (apt-get install {package});"
-                        " or choose network 'loopback'"
-                    )
+            _full_network_needs(("slirp4netns", "slirp4netns"), ("ip", "iproute2"))
         return InForce(self, clients_dir, rootless)
 
     def _resolve_rootless(self, clients_dir: Path) -> "InForce":
         if self.network == "full":
-            for name, package in (("slirp4netns", "slirp4netns"), ("ip", "iproute2"),
-                                  ("nsenter", "util-linux")):  # fmt: skip
-                if shutil.which(name, path=TOOLS_PATH) is None:
-                    raise IsolationUnavailable(
-                        f"network 'full' needs {name} (apt-get install {package});"
-                        " or choose network 'loopback'"
-                    )
+            _full_network_needs(
+                ("slirp4netns", "slirp4netns"), ("ip", "iproute2"), ("nsenter", "util-linux")
+            )
             if not os.access(TUN, os.R_OK | os.W_OK):
                 raise IsolationUnavailable(
                     f"network 'full' as an ordinary user needs {TUN} open to it (Debian's"
@@ -269,6 +260,16 @@ def resolv_conf_place(host_file: str = "/etc/resolv.conf") -> tuple[list[str], s
             return ([], str(path)) if path.is_file() else None
         path = Path(os.path.normpath(path.parent / os.readlink(path)))
     return None
+
+
+def _full_network_needs(*tools: tuple[str, str]) -> None:
+    """IsolationUnavailable naming the first of `tools` (name, Debian package) not installed."""
+    for name, package in tools:
+        if shutil.which(name, path=TOOLS_PATH) is None:
+            raise IsolationUnavailable(
+                f"network 'full' needs {name} (apt-get install {package});"
+                " or choose network 'loopback'"
+            )
 
 
 def tool(name: str) -> str:
