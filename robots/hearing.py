@@ -9,10 +9,10 @@ it serves. Here they cost this process only.
     python robots/hearing.py
     stdin:  {"phrases": [...], "recording": FD} on one line: the recording is read from
             descriptor FD (a WAV file, or another kind ffmpeg reads); with "recording": null,
-            16 kHz mono 16-bit samples follow the line; with {"check": true}, nothing (are
-            the phrases' words known?)
-    stdout: {"text": ..., "words": [...]}, {"ok": true}, or {"error": "why"} (what the
-            program gave was wrong)
+            16 kHz mono 16-bit samples follow, once the phrases' words are known (the
+            microphone is not listened to for a word the model lacks)
+    stdout: {"ok": true} once the phrases' words are known, then {"text": ..., "words":
+            [...]}; or {"error": "why"} (what the program gave was wrong), one line each
 """
 
 import io
@@ -39,18 +39,21 @@ def main() -> int:
     try:
         decoder = load()
         check(decoder, phrases)
-        if request.get("check"):
-            answer = {"ok": True}
-        elif request.get("recording") is not None:
+        say({"ok": True})
+        if request.get("recording") is not None:
             with open(request["recording"], "rb") as recording:
                 pcm = audio_to_pcm(recording.read(MAX_AUDIO_BYTES + 1))
-            answer = recognise(decoder, pcm, phrases)
         else:
-            answer = recognise(decoder, sys.stdin.buffer.read(), phrases)
+            pcm = sys.stdin.buffer.read()
+        say(recognise(decoder, pcm, phrases))
     except Refused as exc:
-        answer = {"error": str(exc)}
-    sys.stdout.write(json.dumps(answer))
+        say({"error": str(exc)})
     return 0
+
+
+def say(answer: dict) -> None:
+    sys.stdout.write(json.dumps(answer) + "\n")
+    sys.stdout.flush()
 
 
 def load():

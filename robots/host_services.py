@@ -42,6 +42,8 @@ import stat
 import sys
 import time
 import wave
+from collections.abc import Awaitable, Callable
+from functools import partial
 from pathlib import Path, PurePosixPath
 
 from channels.db import database_sync_to_async
@@ -149,11 +151,8 @@ class HostServices:
                         return await hear(phrases, recording=fd)
                     finally:
                         os.close(fd)
-                if phrases:  # refused before anything is recorded
-                    await hear(phrases, check=True)
-                speech = await self.speech_settings()
-                samples = await record(seconds, speech.get("microphone"))
-                return await hear(phrases, samples)
+                microphone = (await self.speech_settings()).get("microphone")
+                return await hear(phrases, record=partial(record, seconds, microphone))
         finally:
             self._listeners -= 1
 
@@ -520,12 +519,15 @@ def _record_sounddevice(sounddevice, seconds: float, device) -> bytes:
 
 
 async def hear(
-    phrases: tuple[str, ...], samples: bytes = b"", recording: int | None = None, check=False
+    phrases: tuple[str, ...],
+    recording: int | None = None,
+    record: Callable[[], Awaitable[bytes]] | None = None,
 ) -> dict:
     """What robots/hearing.py hears: in the file open as `recording` (read there, not here),
-    else in `samples` (16 kHz), or whether it knows the phrases' words (`check`); ValueError
-    for what the program gave wrong."""
-    request = {"phrases": list(phrases), "check": check, "recording": recording}
+    else in what `record()` gives (16 kHz samples), recorded once the recogniser knows the
+    phrases' words; ValueError for what the program gave wrong (a word it lacks: before
+    anything is recorded)."""
+    request = {"phrases": list(phrases), "recording": recording}
     process = await asyncio.create_subprocess_exec(
         *hearing_command(),
         stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
@@ -533,9 +535,15 @@ async def hear(
         pass_fds=() if recording is None else (recording,),
     )  # fmt: skip
     try:
-        out, err = await asyncio.wait_for(
-            process.communicate(json.dumps(request).encode() + b"\n" + samples), HEARING_SECONDS
-        )
+        async with asyncio.timeout(HEARING_SECONDS):
+            process.stdin.write(json.dumps(request).encode() + b"\n")
+            answer = _answer(await process.stdout.readline())  # the words known, or why not
+            if answer is not None and "ok" in answer:
+                samples = await record() if record is not None else b""
+                out, err = await process.communicate(samples)
+                answer = _answer(out)
+            else:
+                _, err = await process.communicate()
     except TimeoutError:
         raise RpcError(
             ROBOT_ERROR, f"listen() gave up: hearing took more than {HEARING_SECONDS:g} s"
@@ -544,19 +552,25 @@ async def hear(
         if process.returncode is None:
             process.kill()
             await process.wait()
-    try:
-        answer = json.loads(out)
-    except ValueError:
+    if answer is None:
         why = err.decode(errors="replace").strip().splitlines()
         log.warning("listen(): the recogniser ended with %s: %s", process.returncode, why[-1:])
         raise RpcError(
             ROBOT_ERROR,
             "listen() could not hear it: the recogniser ran out of memory or time"
             f" ({HEARING_MEMORY // 2**20} MB, {HEARING_SECONDS:g} s)",
-        ) from None
+        )
     if "error" in answer:
         raise ValueError(answer["error"])
     return answer
+
+
+def _answer(line: bytes) -> dict | None:
+    """A line of the recogniser's, or None where it ended without one."""
+    try:
+        return json.loads(line)
+    except ValueError:
+        return None
 
 
 def hearing_command() -> list[str]:

@@ -22,7 +22,7 @@ from PIL import Image, ImageDraw
 
 import rhal
 from programs.languages import CLIENTS_DIR, LANGUAGES
-from robots import host_services
+from robots import hearing, host_services
 from robots.host_services import HostServices
 from robots.models import Robot
 from runbox import launcher
@@ -452,6 +452,23 @@ async def test_listen_reads_nothing_outside_the_programs_folder(bot, workdir, tm
     ]:
         error = await bot.error("listen", 5, path, ["move"])
         assert error.code == -32602 and words in str(error), (path, str(error))
+
+
+async def test_the_microphone_is_heard_once_the_recogniser_knows_the_words(workdir):
+    """One recogniser process a call: it knows the words before the microphone is listened
+    to (a word it lacks: nothing is recorded), then hears what was recorded."""
+    recorded = []
+
+    async def microphone() -> bytes:  # what record() gives: 16 kHz mono samples
+        recorded.append("move")
+        said = speak_to_wav(workdir / "move.wav", "move").read_bytes()
+        return hearing.resample(*hearing.read_wav(said))
+
+    with pytest.raises(ValueError, match="does not know the word 'xyzzyq'"):
+        await host_services.hear(("move", "xyzzyq"), record=microphone)
+    assert recorded == []
+    heard = await host_services.hear(("move", "stop"), record=microphone)
+    assert heard == {"text": "move", "words": ["move"]} and recorded == ["move"]
 
 
 async def test_listen_refuses_unknown_words_and_odd_params(bot, workdir):
