@@ -18,6 +18,10 @@ from django.utils.translation import gettext as _
 
 from programs.models import Program, Run
 
+# How long a websocket's read of its viewer's access stands: what it is sent after that waits
+# for a fresh read (a class's teacher replaced, a share taken back, a robot's classes changed).
+ACCESS_STANDS_SECONDS = 2.0
+
 READ, EDIT, OWN = "read", "edit", "own"
 
 

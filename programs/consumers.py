@@ -14,7 +14,7 @@ from django.utils.html import escape
 from django.utils.translation import ngettext
 
 from programs import watch_pass
-from programs.access import get_program_for_user, get_run_for_user
+from programs.access import ACCESS_STANDS_SECONDS, get_program_for_user, get_run_for_user
 from programs.models import Run
 from programs.runlog import (
     count_lines_between,
@@ -32,7 +32,7 @@ from robots.bus import RUNS_GROUP, console_group, run_group
 
 LIST_REFRESH_INTERVAL = 0.5
 # How long a viewer's access stands before what it is sent (output, a state) makes it read again.
-ACCESS_RECHECK_SECONDS = watch_pass.ACCESS_STANDS_SECONDS
+ACCESS_RECHECK_SECONDS = ACCESS_STANDS_SECONDS
 log = logging.getLogger(__name__)
 
 

@@ -22,8 +22,9 @@ from django.contrib.auth import SESSION_KEY
 from django.core import signing
 from django.utils.crypto import constant_time_compare, salted_hmac
 
+from programs.access import ACCESS_STANDS_SECONDS
+
 SALT = "robotide.programs.watch_pass"
-ACCESS_STANDS_SECONDS = 2.0  # as programs.consumers.ACCESS_RECHECK_SECONDS
 
 
 @dataclass(frozen=True)

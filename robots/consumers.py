@@ -11,7 +11,7 @@ from django.http import Http404
 from django.template.loader import render_to_string
 from django.utils.translation import gettext as _
 
-from programs.access import runs_for_user
+from programs.access import ACCESS_STANDS_SECONDS, runs_for_user
 from programs.models import Run
 from robotide.consumers import DirectDispatch
 from robots.bus import send_to_agent
@@ -44,7 +44,7 @@ def parse_control(text: str | None) -> tuple[str, tuple[float, float] | None] | 
 
 # How long a connection's access stands before it is read again (the robot's classes, who may
 # drive it): at the next command or telemetry after that.
-ACCESS_RECHECK_SECONDS = 2.0
+ACCESS_RECHECK_SECONDS = ACCESS_STANDS_SECONDS
 
 
 @database_sync_to_async
