@@ -99,18 +99,24 @@ async def test_a_claim_answered_no_ends_the_program_before_the_robot_is_its(sim_
 
 
 async def test_a_program_that_ends_before_its_claim_is_recorded_as_ran_then_ended(
-    sim_agent, held_claim
+    sim_agent, monkeypatch
 ):
-    """Its end waits for the claim's answer: marked running (with when), then finished
-    (before, its end came first, and the claim then found it no longer waiting: a finished
-    run that never started)."""
+    """Its end waits for the claim's answer: marked running (with when), then finished. The
+    claim is held before it is asked, so the database thread is free for the end: recorded
+    first, the claim then found the run no longer waiting (a finished run never started)."""
+    let_go, claim = asyncio.Event(), sim_agent._claim
+
+    async def held(active):
+        await let_go.wait()
+        await claim(active)
+
+    monkeypatch.setattr(sim_agent, "_claim", held)
     run = await a_run_waiting_to_start()
     await start(run, 'print("bye", flush=True)\n')
     await until(lambda: "o bye" in log_of(run))
     await asyncio.sleep(0.5)  # its end meanwhile: not recorded before the claim's answer
-    # Read aside: the database thread is the held claim's.
-    assert await asyncio.to_thread(lambda: Run.objects.get(pk=run.pk).state) == "starting"
-    held_claim.set()
+    assert await state_of(run) == Run.State.STARTING
+    let_go.set()
     await until_async(lambda: state_of(run), Run.State.FINISHED)
     assert run.started is not None and run.exit_code == 0
 
