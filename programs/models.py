@@ -210,7 +210,7 @@ class Run(models.Model):
 
     @property
     def directory(self) -> Path:
-        return settings.RUNS_DIR / str(self.pk)
+        return self.log_path_of(self.pk).parent
 
     @property
     def log_path(self) -> Path:

@@ -493,7 +493,6 @@ class RobotAgent:
 
     async def _begin(self, run_id, message, language, process, program_env, claimed, gate):
         """The program in its box, as the run's process, registered before it starts."""
-        directory = settings.RUNS_DIR / str(run_id)
         uid = self.isolation.uid(run_id, str(settings.DATA_DIR))
         token = secrets.token_urlsafe(24)
         extra = {
@@ -528,7 +527,7 @@ class RobotAgent:
                 served.belongs_to(run_id, active.user)
         try:
             await process.begin(
-                launch, gate, log_path=directory / "output.log",
+                launch, gate, log_path=Run.log_path_of(run_id),
                 on_output=partial(self._publish_output, run_id),
             )  # fmt: skip
         except BaseException:
