@@ -18,6 +18,7 @@ from uvicorn.protocols.utils import ClientDisconnected
 from programs import watch_pass
 from programs.consumers import ConsoleConsumer, RunConsumer, RunListConsumer
 from programs.models import Program, Run
+from programs.runlog import tail
 from robotide.models import ClassTeacher
 from robots.bus import RUNS_GROUP, agent_channel, console_group, run_group
 from robots.consumers import RobotConsumer
@@ -440,3 +441,22 @@ async def test_a_pass_stands_only_until_access_is_read_in_full(monkeypatch):
     assert (await comm.connect())[0]
     assert "first" in await comm.receive_from()
     assert (await comm.receive_output(2))["type"] == "websocket.close"
+
+
+async def test_a_pass_reads_a_large_log_off_the_event_loop(monkeypatch):
+    """A run's log may be large (its tail counts the lines before it: 64 MB took 30 ms here):
+    one larger than LOOP_READ_BYTES is read in a worker thread, not on the loop that serves
+    every page and robot."""
+    readers = []
+
+    def watched_tail(path):
+        readers.append(threading.get_ident())
+        return tail(path)
+
+    monkeypatch.setattr("programs.consumers.tail", watched_tail)
+    alice, _, run = await make_run(b"o line\n" * 40_000 + b"o first\n")  # 280 KB
+    comm = await with_pass(alice, run)
+    assert (await comm.connect())[0]
+    assert "first" in await comm.receive_from()
+    assert readers and threading.get_ident() not in readers
+    await comm.disconnect()
