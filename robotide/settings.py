@@ -478,6 +478,13 @@ RUN_DEFAULTS = {
 # robot is stopped after this many seconds; a robot's settings.queue_turn_seconds overrides it
 # (0: no limit).
 QUEUE_TURN_SECONDS = env_float("ROBOTIDE_QUEUE_TURN_SECONDS", 300.0)
+# -- Fair shares (robots.fair_shares): runs one user has going at once, on all robots; more
+# wait queued. Staff get their own number; 0: no limit. A robot's settings.runs_at_once caps
+# the runs on it, whoever's.
+RUNS_PER_USER = env_int("ROBOTIDE_RUNS_PER_USER", 2)
+RUNS_PER_STAFF = env_int("ROBOTIDE_RUNS_PER_STAFF", 8)
+if RUNS_PER_USER < 0 or RUNS_PER_STAFF < 0:
+    raise ValueError("ROBOTIDE_RUNS_PER_USER and ROBOTIDE_RUNS_PER_STAFF must be 0 or more")
 # -- Program isolation (runbox.isolation): a robot's settings may override each.
 RUN_ISOLATION = {
     "isolation": os.environ.get("ROBOTIDE_RUN_ISOLATION", "auto"),
