@@ -1,9 +1,11 @@
 """Which robots are online, in fleet mode: an agent's heartbeat (Robot.last_seen) says so.
 
-The web tier watches: runs on a robot whose agent has gone silent are marked ``lost`` within
-AGENT_OFFLINE_AFTER seconds (nothing supervises them any more), and the pages hear of it. Every
-web worker may watch; the update is conditional, so each run is marked once. An agent that
-comes back serves again as soon as its first heartbeat lands.
+The web tier watches: runs held by an agent that has gone silent are marked ``lost`` within
+AGENT_OFFLINE_AFTER seconds (nothing supervises them any more), and the pages hear of it. A run
+no agent has taken yet (its robot just added, its agent still starting) is not lost: it waits,
+and is failed if no agent takes it within AGENT_START_TIMEOUT. Every web worker may watch; the
+update is conditional, so each run is marked once. An agent that comes back serves again as
+soon as its first heartbeat lands.
 
 Runs waiting in a robot's queue (``queued``, robots.run_queue) are not lost with a silent
 agent: they never started, so nothing of theirs went unsupervised. They stay in line and the
@@ -31,15 +33,21 @@ def silent_since() -> timezone.datetime:
     return timezone.now() - timedelta(seconds=settings.AGENT_OFFLINE_AFTER)
 
 
+# A run an agent holds: claimed by it (Run.claim sets its pid). One asked of a robot whose agent
+# is still starting, or has not taken it yet, is not: nothing of it ran, so nothing went
+# unsupervised; it waits for the agent, and sweep_unclaimed fails it if none takes it.
+HELD = Q(state=Run.State.RUNNING) | Q(state=Run.State.STARTING, pid__isnull=False)
+
+
 def sweep_lost() -> list[tuple[int, str]]:
-    """Mark lost the runs of robots whose agent went silent: (run id, robot name) of each."""
+    """Mark lost the runs held by agents that went silent: (run id, robot name) of each."""
     cutoff = silent_since()
     silent = Q(robot__last_seen__lt=cutoff) | Q(robot__last_seen__isnull=True)
-    # Run.ACTIVE: started or handed to the agent; not those waiting in its robot's queue.
-    candidates = Run.objects.filter(silent, state__in=Run.ACTIVE, created__lt=cutoff)
+    # Not those waiting in the robot's queue, nor those no agent has taken yet.
+    candidates = Run.objects.filter(silent, HELD, created__lt=cutoff)
     lost = []
     for run_id, robot_name in candidates.values_list("pk", "robot__name"):
-        updated = Run.objects.filter(pk=run_id, state__in=Run.ACTIVE).update(
+        updated = Run.objects.filter(HELD, pk=run_id).update(
             state=Run.State.LOST,
             reason=f"the agent of robot {robot_name!r} stopped answering",
             ended=timezone.now(),

@@ -27,22 +27,22 @@ def lab():
     return alice, program, alive, silent, never
 
 
-def run_on(program, robot, state, age=30):
+def run_on(program, robot, state, age=30, pid=None):
     run = Run.create_for(program, robot, program.owner)
     created = timezone.now() - timedelta(seconds=age)
-    Run.objects.filter(pk=run.pk).update(state=state, created=created)
+    Run.objects.filter(pk=run.pk).update(state=state, created=created, pid=pid)
     return run
 
 
 def test_runs_of_a_silent_agent_are_lost_and_the_others_are_not(lab):
     alice, program, alive, silent, never = lab
-    running_alive = run_on(program, alive, Run.State.RUNNING)
-    running_silent = run_on(program, silent, Run.State.RUNNING)
-    starting_never = run_on(program, never, Run.State.STARTING)
+    running_alive = run_on(program, alive, Run.State.RUNNING, pid=10)
+    running_silent = run_on(program, silent, Run.State.RUNNING, pid=11)
+    claimed_never = run_on(program, never, Run.State.STARTING, pid=0)  # taken (Run.claim)
     just_asked = run_on(program, silent, Run.State.STARTING, age=0)  # may still be handed over
     finished = run_on(program, silent, Run.State.FINISHED)
     lost = sweep_lost()
-    assert sorted(lost) == sorted([(running_silent.pk, "silent"), (starting_never.pk, "never")])
+    assert sorted(lost) == sorted([(running_silent.pk, "silent"), (claimed_never.pk, "never")])
     running_silent.refresh_from_db()
     assert running_silent.state == "lost" and "stopped answering" in running_silent.reason
     for run, state in [(running_alive, "running"), (just_asked, "starting"),
@@ -50,6 +50,18 @@ def test_runs_of_a_silent_agent_are_lost_and_the_others_are_not(lab):
         run.refresh_from_db()
         assert run.state == state
     assert sweep_lost() == []  # once
+
+
+def test_a_run_no_agent_took_yet_waits_for_it_and_is_not_lost(lab):
+    """Asked of a robot just added, whose agent is still starting (never seen yet), or of one
+    whose agent is away: nothing of it ran, so it is not lost; it waits to be taken (the
+    agent's start takes it, sweep_unclaimed fails it if nobody does)."""
+    alice, program, alive, silent, never = lab
+    untaken = [run_on(program, robot, Run.State.STARTING) for robot in (never, silent)]
+    assert sweep_lost() == []
+    for run in untaken:
+        run.refresh_from_db()
+        assert (run.state, run.pid) == ("starting", None)
 
 
 def test_the_api_says_which_robots_are_online(client, lab):
