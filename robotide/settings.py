@@ -474,6 +474,16 @@ RUN_DEFAULTS = {
     "cpu_percent": env_int("ROBOTIDE_RUN_CPU_PERCENT", 100),  # of one CPU, the run as a whole
     "stop_grace_seconds": 3,
 }
+# -- Run logs (runlogs): a user's logs together, and everybody's, stay within these (bytes on
+# disk; a running run's log counts). When one is met, the oldest ended logs are pruned first:
+# the user's own for their quota, anybody's for the total; the runs themselves are kept. 256 MB
+# holds four full 64 MB logs a student; the total is 4 GB, or a quarter of the disk holding the
+# runs if that is less (a Pi's SD card), so logs can never take the space the database needs.
+RUN_LOG_QUOTA_PER_USER = env_int("ROBOTIDE_LOG_QUOTA_PER_USER_MB", 256) * 1024 * 1024
+RUN_LOG_QUOTA_TOTAL = env_int("ROBOTIDE_LOG_QUOTA_TOTAL_MB", 0) * 1024 * 1024 or None
+# An ended log is compressed (gzip) this long after its run ended: until then a viewer who
+# just watched it reads it as it was written.
+RUN_LOG_COMPRESS_AFTER = env_float("ROBOTIDE_LOG_COMPRESS_AFTER_SECONDS", 300.0)
 # -- A shared robot's run queue (robots.run_queue): while others wait, the program holding the
 # robot is stopped after this many seconds; a robot's settings.queue_turn_seconds overrides it
 # (0: no limit).
