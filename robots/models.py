@@ -12,7 +12,7 @@ from robots.isolation_words import isolation_shown
 # Settings for the runs on a robot; anything else in its `settings` goes to its driver.
 RUN_SETTINGS = (
     "limits", "isolation", "network", "tmp_mb", "loopback_ports", "allow_networks", "camera",
-    "speech", "queue_turn_seconds",
+    "speech", "queue_turn_seconds", "runs_at_once",
 )  # fmt: skip
 
 
@@ -54,6 +54,13 @@ class Robot(models.Model):
         blank=True,
         editable=False,
         help_text=_("What its agent gives each run"),
+    )
+    isolation_runs_at_once = models.PositiveSmallIntegerField(
+        _("runs at once (isolation)"),
+        null=True,
+        blank=True,
+        editable=False,
+        help_text=_("How many runs its agent's isolation allows at once; empty: no limit"),
     )
     groups = models.ManyToManyField(
         "auth.Group",
