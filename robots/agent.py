@@ -66,6 +66,10 @@ LINK_RETRY_MAX = 30.0  # seconds between tries to open a robot that is away
 # network or is closed without a goodbye cannot leave the robot driving.
 TELEOP_DEADMAN = 0.4
 DRIVER_BACK_TIMEOUT = 2.0  # s an emergency stop waits for a bridge to give the device back
+# How long a run this agent gave a box is remembered, so that its start asked again (by the
+# untaken scan and its run.start both, or a run.start delivered twice) is dropped: longer than
+# a channel message lives (60 s) and than the scan looks back (AGENT_START_TIMEOUT).
+STARTED_REMEMBERED = 300.0
 
 
 @dataclass(frozen=True)
@@ -167,6 +171,10 @@ class RobotAgent:
         self._outbox: asyncio.Queue = asyncio.Queue()
         self._tasks: list[asyncio.Task] = []
         self._starting: set[asyncio.Task] = set()
+        # One start per run (see start_run): the runs whose start is under way, and those
+        # given a box lately (run id -> loop time).
+        self._taking: set[int] = set()
+        self._boxed: dict[int, float] = {}
 
     # -- life cycle -----------------------------------------------------------------------
 
@@ -215,7 +223,8 @@ class RobotAgent:
     async def _take_untaken(self) -> None:
         """Runs asked of this robot before its agent listened (a robot added and run at
         once; fleet mode's channel layer keeps nothing for whoever does not listen yet):
-        started from the database. A run.start that comes as well finds it taken."""
+        started from the database. The in-memory layer keeps their run.start and hands it
+        over as well: start_run drops whichever comes second."""
         for message in await database_sync_to_async(untaken_runs)(self.name):
             task = asyncio.create_task(self.start_run(message))
             self._starting.add(task)
@@ -415,14 +424,41 @@ class RobotAgent:
     # -- runs -------------------------------------------------------------------------------
 
     async def start_run(self, message: dict) -> None:
-        """In a task of its own, so whatever goes wrong is logged and ends the run."""
+        """In a task of its own, so whatever goes wrong is logged and ends the run.
+
+        Once per run, whatever order its starts come in: a second start would make a second
+        box, and its program would run beside the first until the claim said no."""
+        run_id = message["run_id"]
+        if not self._take(run_id):
+            log.info("agent %s: run %s is being started or ran here: not again", self.name, run_id)
+            return
         try:
             await self._start_run(message)
         except Exception:
-            log.exception("agent %s: run %s could not start", self.name, message.get("run_id"))
+            log.exception("agent %s: run %s could not start", self.name, run_id)
             with contextlib.suppress(Exception):
                 reason = "could not start: internal error (see the server's log)"
-                await self._end_run(message["run_id"], "failed", None, reason)
+                await self._end_run(run_id, "failed", None, reason)
+        finally:
+            self._taking.discard(run_id)
+
+    def _take(self, run_id: int) -> bool:
+        """The run's start is this one's, before anything is awaited: False if another start
+        of it is under way, or it was given a box here lately. A run that went to the queue
+        got no box: the queue's start of it, later, is its one start."""
+        if run_id in self._taking or run_id in self.runs or run_id in self._boxed:
+            return False
+        self._taking.add(run_id)
+        return True
+
+    def _boxing(self, run_id: int) -> None:
+        """The run gets its box now: remembered for a while, so no other start makes one."""
+        now = asyncio.get_running_loop().time()
+        for old, when in list(self._boxed.items()):  # oldest first
+            if now - when < STARTED_REMEMBERED:
+                break
+            del self._boxed[old]
+        self._boxed[run_id] = now
 
     async def _start_run(self, message: dict) -> None:
         run_id = message["run_id"]
@@ -484,6 +520,7 @@ class RobotAgent:
         language = get_language(message["language"])
         program_env = self.gateway.program_env()
         kind = self._box_kind(program_env)
+        self._boxing(run_id)
         process = await self.boxes.take(kind, f"run-{run_id}")
         try:
             return await self._begin(run_id, message, language, process, program_env, claimed, gate)
