@@ -15,6 +15,8 @@ import dj_database_url
 from django.core.exceptions import ImproperlyConfigured
 from django.utils.translation import gettext_lazy
 
+from runbox.share import Share
+
 BASE_DIR = Path(__file__).resolve().parent.parent
 
 
@@ -495,6 +497,14 @@ RUNS_PER_USER = env_int("ROBOTIDE_RUNS_PER_USER", 2)
 RUNS_PER_STAFF = env_int("ROBOTIDE_RUNS_PER_STAFF", 8)
 if RUNS_PER_USER < 0 or RUNS_PER_STAFF < 0:
     raise ValueError("ROBOTIDE_RUNS_PER_USER and ROBOTIDE_RUNS_PER_STAFF must be 0 or more")
+# -- All runs together (runbox.share): their parent cgroup's memory (a share of the RAM or of
+# the server's own cgroup, whichever is smaller), processes, and CPU weight (the server's 100).
+RUNS_SHARE = {
+    "memory_share": env_float("ROBOTIDE_RUNS_MEMORY_SHARE", 0.6),
+    "pids": env_int("ROBOTIDE_RUNS_PIDS", 4096),
+    "cpu_weight": env_int("ROBOTIDE_RUNS_CPU_WEIGHT", 50),
+}
+Share.from_settings(RUNS_SHARE)  # one out of range stops the start, saying which
 # -- Program isolation (runbox.isolation): a robot's settings may override each.
 RUN_ISOLATION = {
     "isolation": os.environ.get("ROBOTIDE_RUN_ISOLATION", "auto"),

@@ -39,6 +39,10 @@ import signal
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from runbox.share import RunsParent
 
 MB = 1024 * 1024
 RUNS = "robotide-runs"
@@ -59,6 +63,9 @@ class CgroupSupport:
     controllers: tuple[str, ...] = ()
     bases: dict[str, Path] = field(default_factory=dict)  # controller -> folder of runs' cgroups
     why: str = ""  # why there are no cgroups
+    # The cgroup all runs share (runbox.share.RunsParent), whose folders `bases` are: it
+    # makes itself again, limits and all, should it be gone when a run's cgroup is made.
+    parent: "RunsParent | None" = None
 
     @property
     def available(self) -> bool:
@@ -77,7 +84,8 @@ class CgroupSupport:
                 shown.append("memory+swap" if "swap" in self.controllers else "memory")
             elif name != "swap":
                 shown.append(name)
-        return f"cgroup {self.version} ({', '.join(shown)})"
+        text = f"cgroup {self.version} ({', '.join(shown)})"
+        return f"{text}; {self.parent.describe()}" if self.parent is not None else text
 
 
 @functools.cache
@@ -217,7 +225,7 @@ def _keyed(file: Path) -> dict[str, int]:
         return {}
 
 
-def _prepare_v2(base: Path, controllers: tuple[str, ...]) -> None:
+def prepare_v2(base: Path, controllers: tuple[str, ...]) -> None:
     """Make <own>/robotide-runs hand memory, pids and cpu down to the runs' cgroups."""
     own = base.parent
     enable = [name for name in V2_CONTROLLERS if name in controllers]
@@ -300,8 +308,10 @@ class RunCgroup:
         if any(d.exists() for d in cg.folders()):
             cg.remove()  # a run's name is never reused: this one is a leftover
         try:
-            if cg.v2:
-                _prepare_v2(support.bases["memory"], support.controllers)
+            if support.parent is not None:
+                support.parent.ensure(support)  # never a parent without its limits
+            elif cg.v2:
+                prepare_v2(support.bases["memory"], support.controllers)
             for folder in cg.folders():
                 folder.parent.mkdir(exist_ok=True)
                 folder.mkdir()
