@@ -42,6 +42,8 @@ import threading
 
 import uvicorn
 
+from runbox import oom
+
 DEFAULT_BIND = "127.0.0.1:8000"
 
 
@@ -152,6 +154,8 @@ def main(argv: list[str] | None = None) -> int:
     os.umask(0o077)
     if args.command in ("up", "agent"):
         open_files_as_allowed()
+        # Out of memory, the kernel kills a run's process, never the server or an agent first.
+        oom.protect_this_process()
     setup_django()
     return {
         "up": cmd_up,

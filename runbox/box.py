@@ -31,7 +31,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from runbox import cgroups, netns
+from runbox import cgroups, netns, oom
 from runbox.isolation import InForce, tool
 from runbox.netspec import blocked_ranges, host_addresses
 
@@ -317,10 +317,11 @@ class BwrapBox(Box):
             args += ["--seccomp", str(self.seccomp_fd)]
         if self.resolv_r is not None:
             args += self.in_force.resolv_conf_args(self.resolv_r)
-        return [
+        box = [
             *self.in_force.bwrap(self.socket_dir), *args,
             *self.in_force.folder_args(self.disk_mb), "--", "/bin/sh", "-c", ". /dev/stdin",
         ]  # fmt: skip
+        return oom.first_to_go(box, tool("choom"))
 
     def pass_fds(self) -> tuple[int, ...]:
         fds = (self.info_w, self.block_r, self.seccomp_fd, self.resolv_r)
@@ -413,7 +414,7 @@ class RootlessBox(Box):
         self.spec = in_force.inbox_spec(self.socket_dir, self.disk_mb)
 
     def command(self) -> list[str]:
-        return [*self.in_force.unshare(), str(self.theirs)]
+        return oom.first_to_go([*self.in_force.unshare(), str(self.theirs)], tool("choom"))
 
     def pass_fds(self) -> tuple[int, ...]:
         return (self.theirs,) if self.seccomp_fd is None else (self.theirs, self.seccomp_fd)
