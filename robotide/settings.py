@@ -249,6 +249,13 @@ FILE_UPLOAD_MAX_MEMORY_SIZE = MAX_REQUEST_BYTES
 DATA_UPLOAD_MAX_NUMBER_FIELDS = 400  # the admin's bulk actions post one field per row
 DATA_UPLOAD_MAX_NUMBER_FILES = 10
 
+# Blocks are made into Python and compiled by worker processes (programs.blocks_worker), never
+# in the server or an agent: at most BLOCKS_WORKERS at once, each within an address space of
+# BLOCKS_WORKER_MEMORY_MB, and BLOCKS_WORKER_SECONDS of CPU and of wall time a program.
+BLOCKS_WORKERS = env_int("ROBOTIDE_BLOCKS_WORKERS", 2)
+BLOCKS_WORKER_MEMORY_MB = env_int("ROBOTIDE_BLOCKS_WORKER_MEMORY_MB", 512)
+BLOCKS_WORKER_SECONDS = env_int("ROBOTIDE_BLOCKS_WORKER_SECONDS", 10)
+
 # Failed sign-ins within `window_seconds` lock a (user name, address) pair after `failures`, an
 # address after `address_failures` (more: a lab shares one address), for `lock_seconds`.
 LOGIN_THROTTLE = {
