@@ -30,9 +30,14 @@ import zlib
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from runbox import SYSTEM_PATH, seccomp
+from runbox.cgroups import CgroupSupport
 from runbox.netns import NAT_RESOLV_CONF
+
+if TYPE_CHECKING:
+    from runbox.launcher import Limits
 
 ISOLATIONS = ("auto", "sandbox")
 NETWORKS = ("none", "loopback", "full")
@@ -86,8 +91,9 @@ class Policy:
             raise IsolationUnavailable(str(exc)) from None
         return cls(isolation, network, int(settings.get("tmp_mb", cls.tmp_mb)), ports, allowed)
 
-    def resolve(self, clients_dir: Path) -> "InForce":
-        """What this machine gives for the policy, or IsolationUnavailable saying why not."""
+    def resolve(self, clients_dir: Path, cgroups: CgroupSupport | None = None) -> "InForce":
+        """What this machine gives for the policy, or IsolationUnavailable saying why not;
+        `cgroups`: what runs' cgroups are made with here (runbox.share.runs_cgroups), if any."""
         if not seccomp.available():
             raise IsolationUnavailable(
                 "runs get a seccomp filter, and libseccomp cannot make one here"
@@ -95,7 +101,7 @@ class Policy:
             )
         rootless = os.geteuid() != 0
         if rootless:
-            return self._resolve_rootless(clients_dir)
+            return self._resolve_rootless(clients_dir, cgroups)
         if bwrap_path() is None:
             raise IsolationUnavailable(
                 "runs are boxed with bubblewrap, which is not installed"
@@ -103,9 +109,9 @@ class Policy:
             )
         if self.network == "full":
             _full_network_needs(("slirp4netns", "slirp4netns"), ("ip", "iproute2"))
-        return InForce(self, clients_dir, rootless)
+        return InForce(self, clients_dir, rootless, cgroups)
 
-    def _resolve_rootless(self, clients_dir: Path) -> "InForce":
+    def _resolve_rootless(self, clients_dir: Path, cgroups: CgroupSupport | None) -> "InForce":
         if self.network == "full":
             _full_network_needs(
                 ("slirp4netns", "slirp4netns"), ("ip", "iproute2"), ("nsenter", "util-linux")
@@ -122,7 +128,7 @@ class Policy:
                 "rootless runs need unprivileged user namespaces, which this kernel refuses"
                 " (sysctl kernel.unprivileged_userns_clone=1), or run robotide as root"
             )
-        return InForce(self, clients_dir, rootless=True)
+        return InForce(self, clients_dir, rootless=True, cgroups=cgroups)
 
 
 @dataclass(frozen=True)
@@ -130,18 +136,51 @@ class InForce:
     policy: Policy
     clients_dir: Path  # the Robot API clients, mounted read-only for the run
     rootless: bool = False
+    # The cgroups each run and all runs together get (None: not looked at, as none).
+    cgroups: CgroupSupport | None = None
 
     @property
     def network(self) -> str:
         return self.policy.network
 
-    def describe(self, cgroups: str = "") -> str:
+    @property
+    def run_wide(self) -> bool:
+        """Whether a cgroup bounds each run as a whole (memory, processes across its forks)."""
+        return self.cgroups is not None and self.cgroups.available
+
+    @property
+    def runs_at_once(self) -> int | None:
+        """How many runs of one robot may run together: without a run-wide cgroup one run's
+        processes are bounded each on its own, and a second run would double what the robot's
+        runs may take; None: as many as the queue allows."""
+        return None if self.run_wide else 1
+
+    def describe(self, limits: "Limits | None" = None) -> str:
+        """What is in force, in words the robot page shows (robots.isolation_words translates
+        them): never a limit that does not exist. `limits`: the robot's runs' (launcher)."""
         account = "own user namespace" if self.rootless else "own OS account"
         box = "rootless box (user namespaces)" if self.rootless else "sandbox (bubblewrap)"
         parts = [f"{box}, {account}, seccomp, network {self.network}"]
-        if cgroups:
-            parts.append(cgroups)
+        if self.cgroups is not None:
+            parts.append(self.cgroups.describe())  # "no cgroups: <why> — per-process rlimits only"
+        if not self.run_wide:
+            bound = self._per_process(limits)
+            if self.cgroups is None:
+                parts.append(f"per-process rlimits only: {bound}")
+            else:
+                parts[-1] += f": {bound}"
+            unbounded = "no run-wide memory limit"
+            parts.append(f"{unbounded}: no delegated cgroup" if self.rootless else unbounded)
         return "; ".join(parts)
+
+    def _per_process(self, limits: "Limits | None") -> str:
+        """What bounds a run without a cgroup (launcher.Limits.rlimits, address_space=True)."""
+        if limits is None:
+            return "one run at a time"
+        return (
+            f"each process at most {limits.memory_mb} MB, at most {limits.processes}"
+            " processes, one run at a time"
+        )
 
     # Where a run sees its folder, the Robot API socket and the clients: fixed places,
     # whatever the host's layout.

@@ -18,7 +18,7 @@ too, and another robotide's have their own.
 
     support = runs_cgroups(Share(0.6, 4096, 50), instance=str(DATA_DIR))  # detect() + parent
     support.bases                  # the parent's folders: RunCgroup.create makes runs there
-    support.describe()             # "cgroup v1 (...); all runs together at most 14 464 MB, ..."
+    support.describe()             # "cgroup v1 (...); all runs together at most 14463 MB of ..."
 """
 
 import zlib
@@ -76,8 +76,8 @@ class RunsParent:
 
     def describe(self) -> str:
         return (
-            f"all runs together at most {self.memory_bytes // MB} MB, {self.pids} processes,"
-            f" CPU weight {self.cpu_weight} (the server's {SERVER_WEIGHT})"
+            f"all runs together at most {self.memory_bytes // MB} MB of memory and"
+            f" {self.pids} processes, CPU weight {self.cpu_weight} (the server's {SERVER_WEIGHT})"
         )
 
     def ensure(self, support: CgroupSupport) -> None:
