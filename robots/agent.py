@@ -47,6 +47,7 @@ from runbox.ahead import Ahead, discard
 from runbox.box import Launch, Listener, make_box
 from runbox.isolation import InForce, IsolationUnavailable, Policy, run_uid
 from runbox.relays import relay_to_host
+from runbox.share import Share, runs_cgroups
 from runbox.supervisor import RunProcess
 from runbox.watch import RunWatch, signal_account
 
@@ -236,9 +237,12 @@ class RobotAgent:
         self.limits = robot.run_limits(settings.RUN_DEFAULTS)
         # Off the event loop: the first look may start a process and compile the seccomp filter.
         self.isolation, self.isolation_error = await asyncio.to_thread(resolve_isolation, robot)
-        self.cgroups = await asyncio.to_thread(cgroups.detect)
+        if self.isolation is not None:  # runs' cgroups inside this robotide's parent, if any
+            self.cgroups = self.isolation.cgroups
+        else:
+            self.cgroups = await asyncio.to_thread(cgroups.detect)
         await database_sync_to_async(Robot.objects.filter(name=self.name).update)(
-            isolation=self.isolation.describe(self.cgroups.describe())
+            isolation=self.isolation.describe(launcher.Limits.from_settings(self.limits))
             if self.isolation
             else self.isolation_error
         )
@@ -891,7 +895,8 @@ def resolve_isolation(robot: Robot) -> tuple[InForce | None, str]:
     """What the robot's runs get here, or why they cannot run (said to whoever starts one)."""
     try:
         policy = Policy.from_settings(robot.run_isolation(settings.RUN_ISOLATION))
-        in_force = policy.resolve(CLIENTS_DIR)
+        share = Share.from_settings(settings.RUNS_SHARE)
+        in_force = policy.resolve(CLIENTS_DIR, runs_cgroups(share, str(settings.DATA_DIR)))
     except IsolationUnavailable as exc:
         log.error("robot %s: its programs cannot run: %s", robot.name, exc)
         return None, str(exc)
