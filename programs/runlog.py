@@ -1,6 +1,7 @@
-"""Reading a run's log file: tagged lines written by runbox.supervisor."""
+"""Reading a run's log file: tagged lines written by runbox.supervisor, plain or compressed
+(runlogs.files)."""
 
-import os
+from collections import deque
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -8,6 +9,8 @@ from django.utils.html import escape
 
 from programs.error_lines import error_place
 from programs.models import program_filename
+from runlogs import files as log_files
+from runlogs.files import open_log
 
 TAIL_LINES = 2000
 DOWNLOAD_CHUNK = 256 * 1024
@@ -18,51 +21,85 @@ CATCH_UP_BYTES = 256 * 1024
 def tail(path: Path, limit: int = TAIL_LINES) -> tuple[list[tuple[str, str]], int, int]:
     """(last `limit` complete lines, how many earlier lines were left out, offset after the last).
 
-    Reads backwards from the end, so a big log costs a bounded amount of memory.
+    A plain log is read backwards from its end, a compressed one (ended) forwards, keeping
+    only the last lines: either costs a bounded amount of memory. No log (none written yet,
+    or pruned): no lines.
     """
-    try:
-        f = open(path, "rb")  # noqa: SIM115
-    except FileNotFoundError:
+    log = open_log(path)
+    if log is None:
         return [], 0, 0
-    with f:
-        size = f.seek(0, os.SEEK_END)
-        start, data = size, b""
-        while start > 0 and data.count(b"\n") <= limit:
-            step = min(BLOCK, start)
-            start -= step
-            f.seek(start)
-            data = f.read(step) + data
-        end = start + data.rfind(b"\n") + 1  # the stream goes on from the last complete line
-        data = data[: end - start]
-        if start > 0:  # the first piece read may begin inside a line
-            cut = data.find(b"\n") + 1
-            data, start = data[cut:], start + cut
-        lines = data.split(b"\n")[:-1]
-        kept = lines[-limit:]
-        earlier = len(lines) - len(kept) + count_lines(f, start)
+    with log:
+        if log.compressed:
+            data, start, earlier = _last_lines_read_forwards(log.file, limit)
+            end = start + len(data)
+        else:
+            data, start, end = _last_lines_read_backwards(log.file, log.size, limit)
+            earlier = count_lines(log.file, start)
+    lines = data.split(b"\n")[:-1]
+    kept = lines[-limit:]
+    earlier += len(lines) - len(kept)
     return [_tagged(line) for line in kept], earlier, max(end, 0)
+
+
+def _last_lines_read_backwards(f, size: int, limit: int) -> tuple[bytes, int, int]:
+    """(the log's last complete lines, at least `limit` of them if it has them, whole; where
+    they start; where they end)."""
+    start, data = size, b""
+    while start > 0 and data.count(b"\n") <= limit:
+        step = min(BLOCK, start)
+        start -= step
+        f.seek(start)
+        data = f.read(step) + data
+    end = start + data.rfind(b"\n") + 1  # the stream goes on from the last complete line
+    data = data[: end - start]
+    if start > 0:  # the first piece read may begin inside a line
+        cut = data.find(b"\n") + 1
+        data, start = data[cut:], start + cut
+    return data, start, end
+
+
+def _last_lines_read_forwards(f, limit: int) -> tuple[bytes, int, int]:
+    """(the log's last complete lines, at least `limit` of them if it has them; where they
+    start; how many lines come before them): read once from the start, the blocks holding
+    the last lines kept."""
+    kept: deque[bytes] = deque()
+    kept_lines = start = earlier = 0
+    carry = b""  # the incomplete line a block ends with
+    while block := f.read(BLOCK):
+        block, carry = carry + block, b""
+        cut = block.rfind(b"\n") + 1
+        block, carry = block[:cut], block[cut:]
+        kept.append(block)
+        kept_lines += block.count(b"\n")
+        while len(kept) > 1 and kept_lines - kept[0].count(b"\n") >= limit:
+            dropped = kept.popleft()
+            kept_lines -= dropped.count(b"\n")
+            earlier += dropped.count(b"\n")
+            start += len(dropped)
+    return b"".join(kept), start, earlier
 
 
 def lines_after(path: Path, start: int, limit: int = CATCH_UP_BYTES):
     """(complete lines from byte `start` on, offset after them); (None, start) if more than
     `limit` bytes came meanwhile: a tail serves the reader better then."""
-    try:
-        f = open(path, "rb")  # noqa: SIM115
-    except FileNotFoundError:  # nothing written yet
+    log = open_log(path)
+    if log is None:  # nothing written yet (or pruned)
         return ([], 0) if start == 0 else (None, start)
-    with f:
-        size = f.seek(0, os.SEEK_END)
-        if size - start > limit or start > size:
+    with log:
+        if log.size - start > limit or start > log.size:
             return None, start
-        f.seek(start)
-        data = f.read(size - start)
+        log.file.seek(start)
+        data = log.file.read(log.size - start)
     end = data.rfind(b"\n") + 1
     return [_tagged(line) for line in data[:end].split(b"\n")[:-1]], start + end
 
 
 def count_lines_between(path: Path, start: int, end: int) -> int:
-    with open(path, "rb") as f:
-        return count_lines(f, end, start)
+    log = open_log(path)
+    if log is None:  # pruned meanwhile
+        return 0
+    with log:
+        return count_lines(log.file, end, start)
 
 
 def count_lines(f, end: int, start: int = 0) -> int:
@@ -70,6 +107,8 @@ def count_lines(f, end: int, start: int = 0) -> int:
     count, left = 0, end - start
     while left > 0:
         chunk = f.read(min(BLOCK, left))
+        if not chunk:
+            break
         count += chunk.count(b"\n")
         left -= len(chunk)
     return count
@@ -80,11 +119,28 @@ def _tagged(line: bytes) -> tuple[str, str]:
 
 
 def plain_text(path: Path, streams: str = "oes") -> Iterator[bytes]:
-    """The log as the program printed it (tags removed), chunk by chunk, for a download."""
+    """The log as the program printed it (tags removed), chunk by chunk, for a download;
+    nothing if there is no log. Opened before the first chunk is asked for: a log pruned or
+    compressed after that is still read to its end."""
+    log = open_log(path)
+    return _plain_chunks(log, streams) if log is not None else iter(())
+
+
+def _plain_chunks(log, streams: str) -> Iterator[bytes]:
     wanted = tuple(tag.encode() for tag in streams)
-    with open(path, "rb") as f:
-        while lines := f.readlines(DOWNLOAD_CHUNK):
+    with log:
+        while lines := log.file.readlines(DOWNLOAD_CHUNK):
             yield b"".join(line[2:] for line in lines if line.startswith(wanted))
+
+
+def log_exists(path: Path) -> bool:
+    """Whether the run has a log: written, plain or compressed, and not pruned."""
+    return log_files.exists(path)
+
+
+def log_length(path: Path) -> int:
+    """The log's length as written (0 if none), without reading it."""
+    return log_files.written_length(path)
 
 
 def render_lines(lines, place_of: Callable[[str], int | None] | None = None) -> str:

@@ -95,6 +95,7 @@ INSTALLED_APPS = [
     "robotide",
     "robots",
     "programs",
+    "runlogs",
 ]
 
 MIDDLEWARE = [
