@@ -50,6 +50,7 @@ from runbox.relays import relay_to_host
 from runbox.share import Share, runs_cgroups
 from runbox.supervisor import RunProcess
 from runbox.watch import RunWatch, signal_account
+from runlogs.writer import QuotaRunProcess
 
 log = logging.getLogger(__name__)
 
@@ -613,7 +614,7 @@ class RobotAgent:
                 cgroup.remove()
             raise
         settings.RUNS_DIR.mkdir(parents=True, exist_ok=True)
-        return RunProcess(
+        return QuotaRunProcess(  # its log kept within its owner's quota (runlogs)
             box.command(),
             env={"PATH": SYSTEM_PATH},  # the program's own comes with its run (Launch)
             cwd=settings.RUNS_DIR,
