@@ -669,6 +669,7 @@ class RobotAgent:
     async def _end_run(self, run_id, state, exit_code, reason) -> None:
         await database_sync_to_async(Run.mark_ended)(run_id, state, exit_code, reason)
         self._run_changed(run_id)
+        self.queue.ended(run_id)  # its share is free: runs waiting for one may start
 
     def stop_run(self, run_id: int, reason: str) -> bool:
         """Stop: SIGTERM, then SIGKILL after the grace. The program may clean up meanwhile,

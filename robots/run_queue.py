@@ -27,8 +27,16 @@ is kept in the waiting runs (their ``reason``), so it survives the agent's resta
 survive an agent that stops or goes silent (they never started: not ``lost``) and are served
 when it is back; their owners may cancel them meanwhile.
 
-The agent owns one ``RunQueue`` (its hooks: run.start, the lease changing, the emergency stop,
-shutdown); the functions below it are for the web tier.
+Fair shares (robots.fair_shares) use the same line: a run beyond its owner's limit of runs
+going at once, or its robot's, waits here too, its reason saying which ("waiting: you already
+have 2 runs going (your limit is 2)"). It does not hold up the others: runs behind it start
+when they may. It starts, without taking the lease, once a share is free and the robot is not
+busy for its owner; a run that waited for the robot and finds its owner's share taken waits on
+for the share. The agent looks again when a run of its own ends, when another agent says a run
+of a waiting run's owner ended there, and every few seconds in case a word was lost.
+
+The agent owns one ``RunQueue`` (its hooks: run.start, the lease changing, a run ending, the
+emergency stop, shutdown); the functions below it are for the web tier.
 """
 
 from __future__ import annotations
@@ -47,13 +55,15 @@ from django.utils.translation import gettext as _
 
 from programs.access import get_run_for_user, runs_for_user
 from programs.models import Run, in_line
-from robots.bus import RUNS_GROUP, blocking, run_group, tell_agent_sync
+from robots import fair_shares
+from robots.bus import RUNS_GROUP, blocking, run_group, send_to_agent, tell_agent_sync
 from robots.lease import Holder, LeaseHeld
 from robots.models import Robot, robot_group
 
 log = logging.getLogger(__name__)
 
 TICK = 0.25  # seconds between looks at the lease (a person gone idle) and the turn's end
+SHARES_LOOK = 3.0  # seconds between looks at runs waiting for a share, if no word came
 RETRY_DELAY = 1.0
 CHANGED, RESUME = "run.queue_changed", "run.queue_resume"  # RESUME: web tiers of old
 
@@ -74,7 +84,11 @@ class RunQueue:
 
     def __init__(self, agent):
         self.agent = agent
-        self.waiting = 0  # runs queued on this robot, as last counted
+        self.waiting = 0  # runs queued on this robot for the robot, as last counted
+        self.sharing = 0  # runs queued on this robot for a share (fair_shares), as last counted
+        self._look_at_shares = True  # something changed that may free a share
+        self._shares_looked = -math.inf  # loop time of the last look
+        self._box_cap_said: int | None | bool = False  # what the robot's row says (False: unsaid)
         self._counted = False  # whether the database has been asked since the agent started
         self.held = False  # after an emergency stop: nothing starts until someone resumes
         # The lease-holding run's turn while others wait: (its run id, loop time it ends).
@@ -101,7 +115,7 @@ class RunQueue:
             if not self._counted:
                 await self._count()
             if not self.waiting:
-                return False
+                return await self._waits_for_share(run_id)
         reason = Run.HELD if self.held or self.agent.lease.estopped else ""
         rank = await database_sync_to_async(Run.enqueue)(run_id, reason)
         if rank is None:  # stopped or failed before it was handled: nothing to queue
@@ -113,6 +127,45 @@ class RunQueue:
         self.agent._run_changed(run_id)
         self.wake()
         return True
+
+    async def _waits_for_share(self, run_id: int) -> bool:
+        """The robot is free for it: it starts if its owner's and the robot's shares allow."""
+        decision = await database_sync_to_async(fair_shares.admit)(run_id, self.box_cap())
+        if decision.outcome is fair_shares.Admission.ADMITTED:
+            return False
+        if decision.outcome is fair_shares.Admission.QUEUED:
+            if run_id in self.agent.cancelled:  # its stop came while it was being queued
+                self.cancel(run_id)
+            log.info(
+                "agent %s: run %s %s, %s in line", self.agent.name, run_id, decision.reason,
+                decision.rank,
+            )  # fmt: skip
+            self.sharing += 1
+            self.agent._run_changed(run_id)
+        return True
+
+    def box_cap(self) -> int | None:
+        """Runs the agent's isolation allows at once (runbox.isolation.InForce.runs_at_once,
+        where it says; a rootless box without a run-wide cgroup: 1), None: no limit."""
+        return getattr(getattr(self.agent, "isolation", None), "runs_at_once", None) or None
+
+    def ended(self, run_id: int) -> None:
+        """A run of this agent ended: a share is free; agents holding runs of its owner that
+        wait for one look again."""
+        self.wake()
+        task = asyncio.create_task(self._tell_others(run_id))
+        self._marking.add(task)
+        task.add_done_callback(self._marking.discard)
+
+    async def _tell_others(self, run_id: int) -> None:
+        try:
+            robots = await database_sync_to_async(fair_shares.robots_to_look_again)(run_id)
+            for name in robots:
+                await send_to_agent(name, CHANGED)
+        except Exception:  # they look again on their own within SHARES_LOOK
+            log.exception(
+                "agent %s: could not tell other agents of run %s's end", self.agent.name, run_id
+            )
 
     def cancel(self, run_id: int) -> None:
         """A stop for a run the agent does not run: if it waits in line, it is cancelled."""
@@ -132,7 +185,8 @@ class RunQueue:
             log.exception("agent %s: could not cancel queued run %s", self.agent.name, run_id)
 
     def wake(self) -> None:
-        """Something changed (the lease, the queue): look again now."""
+        """Something changed (the lease, the queue, a run ended): look again now."""
+        self._look_at_shares = True
         self._wake.set()
 
     def hold(self) -> None:
@@ -200,6 +254,15 @@ class RunQueue:
         # A person who left the controls alone lets go for the next one (lease.IDLE_SECONDS).
         return holder is None or (holder.kind == "teleop" and self.agent.lease._idle())
 
+    async def _say_box_cap(self) -> None:
+        """The robot's row says what the agent's isolation allows at once (for its page and
+        the API, which have no agent at hand); written when that changes."""
+        cap = self.box_cap()
+        await database_sync_to_async(Robot.objects.filter(name=self.agent.name).update)(
+            isolation_runs_at_once=cap
+        )
+        self._box_cap_said = cap
+
     def _set_waiting(self, count: int) -> None:
         if not (count and self.waiting):
             # Someone begins to wait, or nobody waits any more: a turn is counted from now.
@@ -207,57 +270,102 @@ class RunQueue:
         self.waiting = count
 
     async def _count(self) -> None:
-        waiting, held = await database_sync_to_async(_queue_state)(self.agent.name)
+        waiting, sharing, held = await database_sync_to_async(_queue_state)(self.agent.name)
         self._counted = True
         self._set_waiting(waiting)
-        self.held = bool(waiting) and (held or self.held)
+        self.sharing = sharing
+        self.held = bool(waiting or sharing) and (held or self.held)
 
     async def _step(self) -> None:
-        if not self.waiting or self.held or self._closing:
+        if self.box_cap() != self._box_cap_said:  # the agent started, or was reconfigured
+            await self._say_box_cap()
+        if self.held or self._closing:
             return
-        if self._robot_free():
+        if (self.waiting and self._robot_free()) or self._shares_due():
             await self._start_next()
             return
         holder = self.agent.lease.holder
-        if holder is not None and holder.kind == "run":
+        if self.waiting and holder is not None and holder.kind == "run":
             await self._check_turn(holder)
 
+    def _shares_due(self) -> bool:
+        """Runs wait for a share, and something changed or a while went by since the last
+        look: a look costs the database a query or two, not to be made every tick."""
+        if not self.sharing:
+            return False
+        now = asyncio.get_running_loop().time()
+        return self._look_at_shares or now - self._shares_looked >= SHARES_LOOK
+
     async def _start_next(self) -> None:
-        agent = self.agent
-        while not self._closing and self._robot_free():
-            run = await database_sync_to_async(_first_in_line)(agent.name)
+        """Start the first in line that may start now, and on while others may: a run that
+        waits for the robot once it is free (with the lease), one that waits for a share once
+        the robot is not busy for its owner; each only if its shares allow (fair_shares)."""
+        self._look_at_shares = False
+        self._shares_looked = asyncio.get_running_loop().time()
+        refused: set[int] = set()  # owners whose share is taken, as this look found
+        while not self._closing:
+            line = await database_sync_to_async(_line)(self.agent.name)
+            run = self._next_to_try(line, refused)
             if run is None:
-                self._set_waiting(0)
-                return
-            try:
-                message = run.start_message()  # its owner came with it: no await from here
-            except Exception as exc:  # e.g. its language is gone: it must not block the line
-                if await database_sync_to_async(Run.unqueue)(run.pk):
-                    await agent._end_run(run.pk, "failed", None, f"could not start: {exc}")
+                break
+            decision = await self._try_start(run)
+            if decision is None or decision.robot_full:  # the robot was taken, or is full
+                break
+            if decision.outcome is fair_shares.Admission.WAITS:
+                refused.add(run.owner_id)
+        await self._count()
+
+    def _next_to_try(self, line: list[Run], refused: set[int]) -> Run | None:
+        for run in line:
+            if run.owner_id in refused:
                 continue
-            previous = agent.lease.holder
-            try:  # the lease first, before anything else may run: nobody slips in between
+            if fair_shares.is_share_wait(run.reason):
+                if not self._busy_for(run.owner.get_username()):
+                    return run
+            elif self._robot_free():
+                return run
+        return None
+
+    async def _try_start(self, run: Run) -> fair_shares.Decision | None:
+        """Start ``run`` from the line if its shares allow: the decision (WAITS: a share is
+        taken, it waits on), or None if the robot was taken while we looked."""
+        agent = self.agent
+        try:
+            message = run.start_message()  # its owner came with it: no await from here
+        except Exception as exc:  # e.g. its language is gone: it must not block the line
+            if await database_sync_to_async(Run.unqueue)(run.pk):
+                await agent._end_run(run.pk, "failed", None, f"could not start: {exc}")
+            return fair_shares.Decision(fair_shares.Admission.GONE)
+        # One that waited for the robot takes the lease first, before anything else may run:
+        # nobody slips in between. One that waited for a share starts as it would have.
+        takes_lease = not fair_shares.is_share_wait(run.reason)
+        previous = agent.lease.holder
+        if takes_lease:
+            try:
                 agent.lease.acquire(Holder("run", run.pk, message["user"]))
             except LeaseHeld:  # someone took the robot while we looked
-                return
-            if not await database_sync_to_async(Run.unqueue)(run.pk):
-                agent.lease.release(run.pk)  # cancelled while we looked
-                continue
+                return None
+        decision = await database_sync_to_async(fair_shares.admit)(run.pk, self.box_cap())
+        if decision.outcome is not fair_shares.Admission.ADMITTED:
+            if takes_lease:
+                agent.lease.release(run.pk)
+            if decision.changed:
+                agent._run_changed(run.pk)  # its page says what it waits for now
+            return decision
+        if takes_lease:
             agent._lease_changed()
             if previous is not None:  # a person gone idle: their motion ends (it has already)
                 await agent.stop_motion_of(previous.key)
-            self._set_waiting(max(0, self.waiting - 1))
-            log.info("agent %s: run %s starts from the queue", agent.name, run.pk)
-            # As a task the agent knows of: its shutdown waits for it, and stops its program.
-            task = asyncio.create_task(agent.start_run({**message, "from_queue": True}))
-            agent._starting.add(task)
-            task.add_done_callback(agent._starting.discard)
-            await asyncio.shield(task)
-            if run.pk not in agent.runs and agent.lease.release(run.pk):
-                agent._lease_changed()  # it could not start (or ended already): the next may
-            await self._ranks_changed()
-            await self._count()
-            return
+        log.info("agent %s: run %s starts from the queue", agent.name, run.pk)
+        # As a task the agent knows of: its shutdown waits for it, and stops its program.
+        task = asyncio.create_task(agent.start_run({**message, "from_queue": True}))
+        agent._starting.add(task)
+        task.add_done_callback(agent._starting.discard)
+        await asyncio.shield(task)
+        if takes_lease and run.pk not in agent.runs and agent.lease.release(run.pk):
+            agent._lease_changed()  # it could not start (or ended already): the next may
+        await self._ranks_changed()
+        return decision
 
     async def _check_turn(self, holder: Holder) -> None:
         loop = asyncio.get_running_loop()
@@ -299,14 +407,17 @@ class RunQueue:
         self.agent.publish(robot_group(name), {"type": "robot.runs", "robot": name})
 
 
-def _queue_state(robot_name: str) -> tuple[int, bool]:
+def _queue_state(robot_name: str) -> tuple[int, int, bool]:
+    """Runs waiting for the robot, runs waiting for a share, and whether the queue is held."""
     queue = Run.objects.filter(robot__name=robot_name, state=Run.State.QUEUED)
-    return queue.count(), queue.filter(reason=Run.HELD).exists()
+    sharing = queue.filter(reason__startswith=fair_shares.WAITING).count()
+    return queue.count() - sharing, sharing, queue.filter(reason=Run.HELD).exists()
 
 
-def _first_in_line(robot_name: str) -> Run | None:
+def _line(robot_name: str) -> list[Run]:
+    """The robot's queue, the next to start first, with the runs' owners."""
     robot_id = Robot.objects.filter(name=robot_name).values_list("pk", flat=True).first()
-    return Run.queue_of(robot_id).select_related("owner").first()
+    return list(Run.queue_of(robot_id).select_related("owner"))
 
 
 def _queued_ids(robot_name: str) -> list[int]:

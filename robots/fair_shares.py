@@ -1,0 +1,222 @@
+"""Fair shares of the machine: how many runs one user, and one robot, have going at once.
+
+A user has at most ``RUNS_PER_USER`` runs going on all robots together (staff:
+``RUNS_PER_STAFF``; 0: no limit), and a robot runs at most its ``settings.runs_at_once``
+programs, whoever's, and never more than its agent's isolation allows at once (a rootless box
+without a run-wide cgroup: one). A run beyond a limit waits ``queued`` in its robot's queue
+(robots.run_queue) with the reason in its ``reason``, shown on its page, the robot's page and
+in the API; when a run ends, the agents holding runs that waited for it look again.
+
+The decision is the database's, so that it holds with several agents (fleet mode: one process
+a robot) and web workers at once: a run is *admitted* in one transaction that locks its
+owner's row (and its robot's, for the robot's limit), counts what is going, and marks the run
+admitted (``started`` set) before the lock is let go; two agents cannot both start a user's
+third run. SQLite serialises such transactions anyway (IMMEDIATE).
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+from django.conf import settings
+from django.contrib.auth import get_user_model
+from django.db import models, transaction
+from django.utils import timezone
+from django.utils.translation import gettext as _
+from django.utils.translation import ngettext
+
+from programs.models import Run
+from robots.models import Robot
+
+#: Every reason a run waits for a share begins so (a run waiting for the robot has none).
+WAITING = "waiting: "
+
+
+class Admission(enum.Enum):
+    ADMITTED = "admitted"  # it may start now
+    QUEUED = "queued"  # it was starting; it waits in its robot's queue now
+    WAITS = "waits"  # it was queued; it waits on (its reason says for what, now)
+    GONE = "gone"  # it no longer waits to start: stopped, failed or taken meanwhile
+
+
+@dataclass(frozen=True)
+class Decision:
+    outcome: Admission
+    reason: str = ""  # why it waits (QUEUED, WAITS)
+    rank: int | None = None  # its place in line (QUEUED)
+    changed: bool = False  # its reason is not what it was (WAITS)
+
+    @property
+    def robot_full(self) -> bool:
+        """It waits for the robot's limit: no other run of the robot may start now either."""
+        return self.reason.startswith(ROBOT_FULL)
+
+
+def user_limit(user) -> int | None:
+    """Runs ``user`` may have going at once on all robots; None: no limit."""
+    limit = settings.RUNS_PER_STAFF if user.is_staff else settings.RUNS_PER_USER
+    return limit or None
+
+
+def robot_setting(robot_settings: dict) -> int | None:
+    """A robot's ``runs_at_once``: a whole number, 0 or none for no limit; ValueError else."""
+    value = robot_settings.get("runs_at_once")
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ValueError(
+            _("runs_at_once must be a whole number of runs, 0 or more (0: no limit), not %(v)s")
+            % {"v": repr(value)}
+        )
+    return value or None
+
+
+def robot_limit(robot: Robot, box_cap: int | None = None) -> int | None:
+    """Runs ``robot`` has going at once: the lower of its setting and what its agent's
+    isolation allows (``box_cap``, else as its agent last said); None: no limit."""
+    try:
+        setting = robot_setting(robot.settings)
+    except ValueError:  # refused when saved; a row edited by hand: no limit of its own
+        setting = None
+    if box_cap is None:
+        box_cap = robot.isolation_runs_at_once
+    caps = [cap for cap in (setting, box_cap) if cap]
+    return min(caps) if caps else None
+
+
+def going() -> models.Q:
+    """Runs that take a share: running, or admitted and on their way (an agent's claim or
+    an admission marks it); not those asked and not decided on yet, nor those queued."""
+    taken = models.Q(pid__isnull=False) | models.Q(started__isnull=False)
+    return models.Q(state=Run.State.RUNNING) | (models.Q(state=Run.State.STARTING) & taken)
+
+
+def is_share_wait(reason: str) -> bool:
+    return reason.startswith(WAITING)
+
+
+def user_reason(count: int, limit: int) -> str:
+    # Stored in English, as run reasons are (data, like the run's log).
+    runs = "run" if count == 1 else "runs"
+    return f"{WAITING}you already have {count} {runs} going (your limit is {limit})"
+
+
+ROBOT_FULL = f"{WAITING}the robot runs at most "
+
+
+def robot_reason(limit: int) -> str:
+    programs = "program" if limit == 1 else "programs"
+    return f"{ROBOT_FULL}{limit} {programs} at once"
+
+
+def admit(run_id: int, box_cap: int | None = None) -> Decision:
+    """Decide whether run ``run_id`` may start now, for its first start (it is ``starting``,
+    untaken) or from its robot's queue (``queued``). ``box_cap``: what the deciding agent's
+    isolation allows at once."""
+    with transaction.atomic():
+        ids = Run.objects.filter(pk=run_id).values_list("owner_id", "robot_id").first()
+        if ids is None:
+            return Decision(Admission.GONE)
+        owner = get_user_model().objects.select_for_update().get(pk=ids[0])
+        robot = Robot.objects.select_for_update().get(pk=ids[1])
+        run = Run.objects.filter(pk=run_id).first()  # as it is now, under the locks
+        queued = run.state == Run.State.QUEUED
+        if not queued and not (run.state == Run.State.STARTING and run.pid is None):
+            return Decision(Admission.GONE)
+        if not queued and run.started is not None:
+            return Decision(Admission.ADMITTED)  # admitted already: its claim decides the rest
+        reason = _over_limit(run, user_limit(owner), robot_limit(robot, box_cap))
+        if reason is None:
+            return Decision(_admitted(run, queued))
+        if queued:
+            Run.objects.filter(pk=run_id, state=Run.State.QUEUED).update(reason=reason)
+            return Decision(Admission.WAITS, reason, changed=reason != run.reason)
+        rank = Run.enqueue(run_id, reason)
+        if rank is None:
+            return Decision(Admission.GONE)
+        return Decision(Admission.QUEUED, reason, rank)
+
+
+def _over_limit(run: Run, per_user: int | None, per_robot: int | None) -> str | None:
+    """Why ``run`` may not start now, or None."""
+    others = Run.objects.filter(going()).exclude(pk=run.pk)
+    if per_user is not None:
+        count = others.filter(owner_id=run.owner_id).count()
+        if count >= per_user:
+            return user_reason(count, per_user)
+    if per_robot is not None and others.filter(robot_id=run.robot_id).count() >= per_robot:
+        return robot_reason(per_robot)
+    return None
+
+
+def _admitted(run: Run, queued: bool) -> Admission:
+    now = timezone.now()
+    if queued:  # Run.unqueue's step, admitted in the same write
+        changed = Run.objects.filter(pk=run.pk, state=Run.State.QUEUED).update(
+            state=Run.State.STARTING, queue_position=None, reason="", pid=None, started=now
+        )
+    else:
+        changed = Run.objects.filter(
+            pk=run.pk, state=Run.State.STARTING, pid__isnull=True, started__isnull=True
+        ).update(started=now)
+    return Admission.ADMITTED if changed else Admission.GONE
+
+
+def robots_to_look_again(run_id: int) -> list[str]:
+    """A run ended: the robots other than its own whose queues hold runs of its owner waiting
+    for a share (their agents look again; its own agent does anyway)."""
+    ids = Run.objects.filter(pk=run_id).values_list("owner_id", "robot_id").first()
+    if ids is None:
+        return []
+    waiting = Run.objects.filter(
+        owner_id=ids[0], state=Run.State.QUEUED, reason__startswith=WAITING
+    ).exclude(robot_id=ids[1])
+    return sorted(set(waiting.values_list("robot__name", flat=True)))
+
+
+@dataclass(frozen=True)
+class InForce:
+    """What the robot's page and the API say is in force, for one viewer."""
+
+    runs_per_user: int | None  # the viewer's own limit, on all robots
+    yours_going: int
+    runs_at_once: int | None  # the robot's, whoever's runs
+    robot_going: int
+
+    def as_dict(self) -> dict:
+        return {
+            "runs_per_user": self.runs_per_user,
+            "yours_going": self.yours_going,
+            "runs_at_once": self.runs_at_once,
+            "robot_going": self.robot_going,
+        }
+
+    @property
+    def user_words(self) -> str:
+        if self.runs_per_user is None:
+            return _("You may have any number of runs going at once.")
+        return ngettext(
+            "You may have %(limit)s run going at once, on all robots (%(going)s now); more wait"
+            " in line.",
+            "You may have %(limit)s runs going at once, on all robots (%(going)s now); more wait"
+            " in line.",
+            self.runs_per_user,
+        ) % {"limit": self.runs_per_user, "going": self.yours_going}
+
+    @property
+    def robot_words(self) -> str:
+        if self.runs_at_once is None:
+            return _("This robot runs any number of programs at once.")
+        return ngettext(
+            "This robot runs at most %(limit)s program at once (%(going)s now).",
+            "This robot runs at most %(limit)s programs at once (%(going)s now).",
+            self.runs_at_once,
+        ) % {"limit": self.runs_at_once, "going": self.robot_going}
+
+
+def in_force(user, robot: Robot) -> InForce:
+    runs = Run.objects.filter(going())
+    mine = runs.filter(owner_id=user.pk).count() if user.is_authenticated else 0
+    per_user = user_limit(user) if user.is_authenticated else None
+    return InForce(per_user, mine, robot_limit(robot), runs.filter(robot=robot).count())
