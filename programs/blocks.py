@@ -29,6 +29,7 @@ import re
 import unicodedata
 
 from django.utils.translation import gettext as _
+from django.utils.translation import gettext_lazy as _lazy
 
 __all__ = ["BlocksError", "block_types", "to_python", "to_runnable_python"]
 
@@ -100,7 +101,18 @@ RESERVED = {"bot", "robot", "time", "math", "random", "TURN_SPEED", *HELPERS}
 RESERVED |= set(dir(builtins)) | set(keyword.kwlist)
 
 MAX_BLOCKS = 10_000
-MAX_ELSE_IFS = 1000
+# What blocks make, capped on the JSON before any code is made (_measure): a block's mutator
+# makes code for every branch or item it says it has, plugged in or not, so a 57-byte if block
+# with 1000 else-ifs made 21 KB of Python. Caps of one block, then of the whole program.
+MAX_ELSE_IFS = 100  # else-if branches of one if block
+MAX_ITEMS = 100  # items of one block (a text join, a list)
+MAX_BRANCHES = 2000  # else-if and else branches in all
+MAX_ALL_ITEMS = 2000  # items in all
+MAX_DEPTH = 50  # blocks plugged inside each other
+MAX_VARIABLES = 1000
+# The Python: no longer than a program may be (programs.models.MAX_SOURCE_BYTES), so that its
+# copy as a Python program can be saved too.
+MAX_CODE_BYTES = 512 * 1024
 INDENT = "    "
 EMPTY_TEXT = "''"
 MAX_INTEGER = 10**18  # a JSON number larger than this is refused, not approximated
@@ -116,10 +128,13 @@ def to_python(source_json: str) -> str:
         ) from None
     except RecursionError:
         raise BlocksError(_("This blocks program is nested too deeply.")) from None
+    _measure(workspace)
     try:
         code = _Generator(workspace).program()
     except RecursionError:
         raise BlocksError(_("This blocks program is nested too deeply.")) from None
+    if len(code.encode()) > MAX_CODE_BYTES:
+        raise BlocksError(_too_long())
     try:
         compile(code, "<blocks>", "exec")
     except (SyntaxError, RecursionError, MemoryError) as exc:
@@ -146,6 +161,93 @@ def block_types() -> set[str]:
     return set(generator.statement) | set(generator.value)
 
 
+def _measure(workspace) -> None:
+    """Refuse, naming the block, blocks that would make too much Python: counted on the JSON,
+    before any code is made. What is malformed is left to the generator to say."""
+    if not isinstance(workspace, dict):
+        return
+    variables = workspace.get("variables")
+    if isinstance(variables, list) and len(variables) > MAX_VARIABLES:
+        raise BlocksError(
+            _("This blocks program has more than %(count)s variables.") % {"count": MAX_VARIABLES}
+        )
+    top = workspace.get("blocks")
+    # Depth first, in the generator's order, so the block named is the first one past a cap.
+    stack = [(block, 1) for block in reversed(_list_or_none(top, "blocks") or ())]
+    blocks = branches = items = 0
+    while stack:
+        block, depth = stack.pop()
+        if not isinstance(block, dict):
+            continue
+        blocks += 1
+        if blocks > MAX_BLOCKS:
+            raise BlocksError(
+                _("This blocks program has more than %(count)s blocks.") % {"count": MAX_BLOCKS}
+            )
+        if depth > MAX_DEPTH:
+            raise BlocksError(
+                _("%(block)s is nested too deeply: blocks may go %(count)s inside each other.")
+                % {"block": _name_of(block), "count": MAX_DEPTH}
+            )
+        state = block.get("extraState")
+        if isinstance(state, dict):
+            else_ifs, count = _count(state, "elseIfCount"), _count(state, "itemCount")
+            branches += else_ifs + bool(state.get("hasElse"))
+            items += count
+            _refuse_past(block, else_ifs, MAX_ELSE_IFS, ONE_BLOCKS_ELSE_IFS)
+            _refuse_past(block, count, MAX_ITEMS, ONE_BLOCKS_ITEMS)
+            _refuse_past(block, branches, MAX_BRANCHES, ALL_BRANCHES)
+            _refuse_past(block, items, MAX_ALL_ITEMS, ALL_ITEMS)
+        stack.append((_plugged(block.get("next")), depth))
+        inputs = block.get("inputs")
+        for connection in reversed(inputs.values()) if isinstance(inputs, dict) else ():
+            stack.append((_plugged(connection), depth + 1))
+
+
+def _list_or_none(container, key: str) -> list | None:
+    value = container.get(key) if isinstance(container, dict) else None
+    return value if isinstance(value, list) else None
+
+
+def _plugged(connection):
+    """The block the generator takes from a connection: the one plugged in, else its shadow."""
+    if not isinstance(connection, dict):
+        return None
+    return connection.get("block") or connection.get("shadow")
+
+
+def _count(state: dict, key: str) -> int:
+    """A mutator's count; 0 for one that is no count (the generator says so where it reads it)."""
+    value = state.get(key, 0)
+    if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+        return 0
+    return value
+
+
+# What _measure says of the block past a cap.
+ONE_BLOCKS_ELSE_IFS = _lazy(
+    "%(block)s has %(count)s else-if branches; an if block may have at most %(most)s."
+)
+ONE_BLOCKS_ITEMS = _lazy("%(block)s has %(count)s items; a block may have at most %(most)s.")
+ALL_BRANCHES = _lazy("%(block)s takes this program past %(most)s else-if and else branches in all.")
+ALL_ITEMS = _lazy("%(block)s takes this program past %(most)s items in all.")
+
+
+def _refuse_past(block: dict, count: int, most: int, message) -> None:
+    if count > most:
+        shown = count if count < 10**12 else f"{10**12:,}+"  # a 4000-digit count is not read
+        raise BlocksError(str(message) % {"block": _name_of(block), "count": shown, "most": most})
+
+
+def _too_long(block: dict | None = None) -> str:
+    kb = MAX_CODE_BYTES // 1024
+    if block is None:
+        return _("This blocks program's Python would be longer than %(kb)s KB.") % {"kb": kb}
+    return _(
+        "%(block)s makes this program's Python longer than %(kb)s KB, the most a program may be."
+    ) % {"block": _name_of(block), "kb": kb}
+
+
 def _name_of(block: dict) -> str:
     """How an error names a block: its type and id."""
     block_id = block.get("id")
@@ -163,6 +265,7 @@ class _Generator:
         self.used: set[str] = set(RESERVED)
         self.variables: dict[str, str] = {}  # variable id -> identifier
         self.by_name: dict[str, str] = {}  # variable name -> identifier
+        self.suffixes: dict[str, int] = {}  # base -> the last number tried after it
         self.declared: list[str] = []
         self.helpers: set[str] = set()
         self.imports: set[str] = set()
@@ -220,10 +323,13 @@ class _Generator:
         if not isinstance(blocks, dict):
             raise BlocksError(_("The workspace's 'blocks' must be an object with a 'blocks' list."))
         body: list[str] = []
+        size = 0
         for block in _in_reading_order(self._list(blocks, "blocks", "the workspace")):
             if not isinstance(block, dict):
                 raise BlocksError(_("Each of the workspace's top blocks must be an object."))
-            body += self._sequence(block)
+            stack = self._sequence(block)
+            size = _within_cap(size, stack, block)
+            body += stack
 
         lines = [HEADER, "import robot, time"]
         if self.imports:
@@ -245,10 +351,13 @@ class _Generator:
     def _sequence(self, block) -> list[str]:
         """The lines of a stack of blocks, from `block` down its "next" chain."""
         lines: list[str] = []
+        size = 0
         while block is not None:
             self._check(block)
             if _enabled(block):
-                lines += self._statement(block)
+                made = self._statement(block)
+                size = _within_cap(size, made, block)
+                lines += made
             block = self._connected(block.get("next"), block, "next")
         return lines
 
@@ -382,10 +491,13 @@ class _Generator:
             identifier = self.by_name[name]
         else:
             base = _identifier(name)
-            identifier, n = base, 1
+            # From the last number tried: a thousand names made alike are not a million tries.
+            n = self.suffixes.get(base, 1)
+            identifier = base if n == 1 else f"{base}{n}"
             while identifier in self.used:
                 n += 1
                 identifier = f"{base}{n}"
+            self.suffixes[base] = n
             self.used.add(identifier)
             self.by_name[name] = identifier
             self.declared.append(identifier)
@@ -553,10 +665,10 @@ class _Generator:
     def _join(self, block: dict):
         state = block.get("extraState") or {}
         count = state.get("itemCount", 2) if isinstance(state, dict) else None
-        if not isinstance(count, int) or isinstance(count, bool) or not 0 <= count <= 1000:
+        if not isinstance(count, int) or isinstance(count, bool) or not 0 <= count <= MAX_ITEMS:
             raise BlocksError(
-                _("%(block)s: itemCount must be a whole number to 1000.")
-                % {"block": _name_of(block)}
+                _("%(block)s: itemCount must be a whole number to %(count)s.")
+                % {"block": _name_of(block), "count": MAX_ITEMS}
             )
         parts = [self._as_text(block, f"ADD{n}", ADDITIVE) for n in range(count)]
         if not parts:
@@ -643,6 +755,16 @@ class _Generator:
 
     def _memory_get(self, block: dict):
         return f"bot.memory_get({self._text_field(block, 'KEY')!r})", CALL
+
+
+def _within_cap(size: int, lines: list[str], block: dict) -> int:
+    """`size` (characters so far) with `lines` added; refused naming `block` past the cap.
+    Each stack counts its own lines as they stand, so code is refused as soon as it grows
+    past the cap, not once all of it is made."""
+    size += sum(map(len, lines)) + len(lines)
+    if size > MAX_CODE_BYTES:
+        raise BlocksError(_too_long(block))
+    return size
 
 
 def _enabled(block: dict) -> bool:

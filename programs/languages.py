@@ -19,7 +19,7 @@ from pathlib import Path
 from django.utils.translation import gettext
 from django.utils.translation import gettext_lazy as _
 
-from programs import blocks
+from programs import blocks_worker
 from runbox import SYSTEM_PATH
 
 CLIENTS_DIR = Path(__file__).resolve().parent / "clients"
@@ -199,7 +199,7 @@ LANGUAGES: dict[str, Language] = {
             template=BLOCKS_TEMPLATE,
             env={"PYTHONUNBUFFERED": "1", "PYTHONDONTWRITEBYTECODE": "1"},
             client_paths={"PYTHONPATH": "{clients}/python"},
-            compiler=blocks.to_runnable_python,
+            compiler=blocks_worker.to_runnable_python,
             compiled_extension=".py",
         ),
         Language(

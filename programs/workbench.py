@@ -25,10 +25,10 @@ from django.utils import timezone
 from django.utils.translation import gettext as _
 from django.views.decorators.http import require_GET, require_POST
 
-from programs import blocks
+from programs import blocks_worker
 from programs.access import EDIT, can, get_program_for_user
-from programs.forms import EditProgramForm, free_name
-from programs.models import Draft, Program, Revision
+from programs.forms import EditProgramForm, free_name, too_large
+from programs.models import MAX_SOURCE_BYTES, Draft, Program, Revision
 from robotide.security import plain_number
 from robots.models import get_robot_for_user
 from robots.runs import RunRefused, start_run
@@ -138,15 +138,20 @@ def _errors(form) -> list[str]:
 @login_required
 @require_POST
 def blocks_python(request: HttpRequest, program_id: int) -> JsonResponse:
-    """The Python a blocks text runs as, for the read-only pane beside the blocks."""
+    """The Python a blocks text runs as, for the read-only pane beside the blocks: made in a
+    worker process (programs.blocks_worker), from no more than a program may be."""
     get_program_for_user(request.user, program_id)
     source = request.POST.get("source", "")
+    if len(source.encode()) > MAX_SOURCE_BYTES:
+        return JsonResponse({"error": too_large()}, status=413)
     if not source.strip():
         return JsonResponse({"python": _("# No blocks yet: drag some from the toolbox.") + "\n"})
     try:
-        return JsonResponse({"python": blocks.to_python(source)})
-    except ValueError as exc:
-        return JsonResponse({"error": str(exc)}, status=400)
+        return JsonResponse({"python": blocks_worker.to_python(source)})
+    except blocks_worker.BlocksBusy as exc:
+        return JsonResponse({"error": str(exc)}, status=503)
+    except ValueError as exc:  # a BlocksError: its message names the block
+        return JsonResponse({"error": str(exc)}, status=422)
 
 
 @login_required
@@ -154,8 +159,11 @@ def blocks_python(request: HttpRequest, program_id: int) -> JsonResponse:
 def blocks_as_python(request: HttpRequest, program_id: int) -> HttpResponse:
     """A new Python program of the user's from the blocks as they are in the editor."""
     program = get_program_for_user(request.user, program_id)
+    source = request.POST.get("source", program.source)
     try:
-        code = blocks.to_python(request.POST.get("source", program.source))
+        if len(source.encode()) > MAX_SOURCE_BYTES:
+            raise ValueError(too_large())
+        code = blocks_worker.to_python(source)
     except ValueError as exc:
         messages.error(request, _("These blocks do not make a program yet: %(why)s") % {"why": exc})
         return redirect("program-edit", program.pk)
