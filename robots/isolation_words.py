@@ -16,6 +16,18 @@ WORDS = {
     "memory+swap": _("memory+swap"),
     "memory": _("memory"),
     "pids": _("pids"),  # the controller: processes
+    # runbox.share: all runs' parent cgroup
+    "all runs together at most": _("all runs together at most"),
+    "MB of memory and": _("MB of memory and"),
+    "CPU weight": _("CPU weight"),
+    "the server's": _("the server's"),
+    # runbox.isolation: a run bounded without a run-wide cgroup
+    "each process at most": _("each process at most"),
+    "at most": _("at most"),
+    "processes": _("processes"),
+    "one run at a time": _("one run at a time"),
+    "no run-wide memory limit": _("no run-wide memory limit"),
+    "no delegated cgroup": _("no delegated cgroup"),
 }
 # Longest first, whole words only: "memory+swap" before "memory".
 _FRAGMENT = re.compile(
