@@ -10,7 +10,7 @@ from pydantic import field_validator, model_validator
 import rhal
 from programs.api import Error
 from robotide.schemas import Body
-from robots import stops
+from robots import fair_shares, stops
 from robots.bus import announce_robot_sync, ask_agent_sync, reconfigure_sync
 from robots.driver_settings import check_settings, known_driver
 from robots.models import Robot, get_robot_for_user, robots_for_user
@@ -53,10 +53,35 @@ class RobotOut(Schema):
     last_seen: str | None = Field(None, description="its agent's last heartbeat")
     agent_host: str = Field("", description="where its agent runs")
     isolation: str = Field(description="What its agent gives each run, or why runs are refused")
+    # Fair shares in force (robots.fair_shares); more runs wait queued, saying why.
+    runs_per_user: int | None = Field(
+        None, description="runs you may have going at once, on all robots; null: no limit"
+    )
+    your_runs_going: int = Field(0, description="your runs going now, on all robots")
+    runs_at_once: int | None = Field(
+        None, description="runs this robot has going at once, whoever's; null: no limit"
+    )
+    runs_going: int = Field(0, description="runs going on this robot now")
 
     @staticmethod
     def resolve_last_seen(robot):
         return robot.last_seen.isoformat() if robot.last_seen else None
+
+    @staticmethod
+    def resolve_runs_per_user(robot, context):
+        return fair_shares.in_force_of(context["request"].user, robot).runs_per_user
+
+    @staticmethod
+    def resolve_your_runs_going(robot, context):
+        return fair_shares.in_force_of(context["request"].user, robot).yours_going
+
+    @staticmethod
+    def resolve_runs_at_once(robot, context):
+        return fair_shares.in_force_of(context["request"].user, robot).runs_at_once
+
+    @staticmethod
+    def resolve_runs_going(robot, context):
+        return fair_shares.in_force_of(context["request"].user, robot).robot_going
 
 
 @robots_router.get("", response=list[RobotOut])

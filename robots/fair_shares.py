@@ -55,7 +55,8 @@ class Decision:
 
 def user_limit(user) -> int | None:
     """Runs ``user`` may have going at once on all robots; None: no limit."""
-    limit = settings.RUNS_PER_STAFF if user.is_staff else settings.RUNS_PER_USER
+    staff = user.is_staff or user.is_superuser
+    limit = settings.RUNS_PER_STAFF if staff else settings.RUNS_PER_USER
     return limit or None
 
 
@@ -220,3 +221,11 @@ def in_force(user, robot: Robot) -> InForce:
     mine = runs.filter(owner_id=user.pk).count() if user.is_authenticated else 0
     per_user = user_limit(user) if user.is_authenticated else None
     return InForce(per_user, mine, robot_limit(robot), runs.filter(robot=robot).count())
+
+
+def in_force_of(user, robot: Robot) -> InForce:
+    """``in_force``, asked once for a robot row however many fields of an answer read it."""
+    found = getattr(robot, "_shares_in_force", None)
+    if found is None or found[0] != user.pk:
+        found = robot._shares_in_force = (user.pk, in_force(user, robot))
+    return found[1]
