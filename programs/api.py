@@ -3,7 +3,7 @@ from typing import Literal
 
 from django.db import IntegrityError
 from django.db.models import Count
-from django.http import HttpResponse, StreamingHttpResponse
+from django.http import HttpResponse
 from django.utils.http import content_disposition_header
 from django.utils.translation import gettext as _
 from ninja import Field, File, Form, Router, Schema, UploadedFile
@@ -22,7 +22,7 @@ from programs.access import (
 from programs.forms import already_named
 from programs.languages import LANGUAGES, get_language
 from programs.models import MAX_SOURCE_BYTES, Program, Run
-from programs.runlog import plain_text
+from programs.runlog import download
 from robotide.schemas import Body
 from robots import run_queue, stops
 from robots.models import get_robot_for_user
@@ -124,6 +124,13 @@ class RunOut(Schema):
     created: datetime
     started: datetime | None
     ended: datetime | None
+    log_bytes: int = Field(
+        0, description="the bytes its log takes on disk, counted against its owner's quota"
+    )
+    log_pruned_at: datetime | None = Field(
+        None, description="when its log was deleted to keep run logs within a quota, if it was"
+    )
+    log_pruned_reason: str = Field("", description="why its log was deleted, if it was")
 
     live: str = Field(
         "",
@@ -365,11 +372,7 @@ def get_run(request, run_id: int):
 def get_run_log(request, run_id: int, stream: Literal["all", "stdout", "stderr"] = "all"):
     run = get_run_for_user(request.user, run_id)
     streams = {"all": "oes", "stdout": "o", "stderr": "e"}[stream]
-    if not run.log_path.exists():
-        return HttpResponse(b"", content_type="text/plain; charset=utf-8")
-    return StreamingHttpResponse(
-        plain_text(run.log_path, streams), content_type="text/plain; charset=utf-8"
-    )
+    return download(run, streams)  # 410 saying when and why if its log was pruned
 
 
 @runs_router.post("/{int:run_id}/stop", response=RunOut)

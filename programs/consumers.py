@@ -19,6 +19,7 @@ from programs.models import Run
 from programs.runlog import (
     count_lines_between,
     lines_after,
+    log_length,
     places_for,
     places_in,
     render_lines,
@@ -306,10 +307,7 @@ def query_param(scope, name: str) -> str | None:
 
 
 def _small(path) -> bool:
-    try:
-        return path.stat().st_size <= LOOP_READ_BYTES
-    except FileNotFoundError:  # nothing written yet
-        return True
+    return log_length(path) <= LOOP_READ_BYTES  # plain or compressed; 0 if none yet
 
 
 def session_key(scope) -> str | None:

@@ -5,17 +5,20 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+from django.http import HttpResponse, StreamingHttpResponse
 from django.utils.html import escape
 
 from programs.error_lines import error_place
 from programs.models import program_filename
 from runlogs import files as log_files
 from runlogs.files import open_log
+from runlogs.notes import pruned_text
 
 TAIL_LINES = 2000
 DOWNLOAD_CHUNK = 256 * 1024
 BLOCK = 256 * 1024
 CATCH_UP_BYTES = 256 * 1024
+TEXT = "text/plain; charset=utf-8"
 
 
 def tail(path: Path, limit: int = TAIL_LINES) -> tuple[list[tuple[str, str]], int, int]:
@@ -131,6 +134,27 @@ def _plain_chunks(log, streams: str) -> Iterator[bytes]:
     with log:
         while lines := log.file.readlines(DOWNLOAD_CHUNK):
             yield b"".join(line[2:] for line in lines if line.startswith(wanted))
+
+
+def download(run, streams: str = "oes") -> HttpResponse:
+    """The run's log as plain text (see plain_text); a pruned log's answer says when and why
+    (410), also when it went while this was asked."""
+    log = open_log(run.log_path)
+    if log is None:
+        run.refresh_from_db(fields=["log_pruned_at", "log_pruned_reason"])
+        if run.log_pruned_at is not None:
+            return HttpResponse(pruned_text(run), status=410, content_type=TEXT)
+        return HttpResponse(b"", content_type=TEXT)
+    return StreamingHttpResponse(_plain_chunks(log, streams), content_type=TEXT)
+
+
+def read_for_page(run) -> tuple[list[tuple[str, str]], int, int]:
+    """The tail a page shows (see tail); a log found gone has the run read again, so the page
+    says it was pruned (when it went while the page was made)."""
+    lines, skipped, offset = tail(run.log_path)
+    if not lines and not run.ongoing and run.log_pruned_at is None:
+        run.refresh_from_db(fields=["log_pruned_at", "log_pruned_reason"])
+    return lines, skipped, offset
 
 
 def log_exists(path: Path) -> bool:

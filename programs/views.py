@@ -5,7 +5,7 @@ from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.core.exceptions import PermissionDenied, ValidationError
 from django.db.models import Exists, OuterRef
-from django.http import HttpRequest, HttpResponse, StreamingHttpResponse
+from django.http import HttpRequest, HttpResponse
 from django.shortcuts import get_object_or_404, redirect, render
 from django.utils.http import content_disposition_header, url_has_allowed_host_and_scheme
 from django.utils.translation import gettext as _
@@ -30,7 +30,7 @@ from programs.languages import (
     get_language,
 )
 from programs.models import Program, Run, Share
-from programs.runlog import places_in, plain_text, render_lines, tail
+from programs.runlog import download, places_in, read_for_page, render_lines
 from programs.shares import ShareError, add_share
 from robots import run_queue
 from robots.models import get_robot_for_user, robots_for_user
@@ -397,7 +397,7 @@ def run_tables_context(user, robot: str | None) -> dict:
 @login_required
 def run_detail(request: HttpRequest, run_id: int) -> HttpResponse:
     run = get_run_for_user(request.user, run_id)
-    lines, skipped, offset = tail(run.log_path)
+    lines, skipped, offset = read_for_page(run)
     log_html = render_lines(lines, places_in(run))
     context = {"run": run, "log_html": log_html, "skipped": skipped, "offset": offset}
     return render(request, "runs/detail.html", context)
@@ -406,12 +406,9 @@ def run_detail(request: HttpRequest, run_id: int) -> HttpResponse:
 @login_required
 def run_log(request: HttpRequest, run_id: int) -> HttpResponse:
     run = get_run_for_user(request.user, run_id)
-    if not run.log_path.exists():
-        return HttpResponse(b"", content_type="text/plain; charset=utf-8")
-    response = StreamingHttpResponse(
-        plain_text(run.log_path), content_type="text/plain; charset=utf-8"
-    )
-    response["Content-Disposition"] = f'attachment; filename="{run.log_filename}"'
+    response = download(run)
+    if response.status_code == 200:
+        response["Content-Disposition"] = f'attachment; filename="{run.log_filename}"'
     return response
 
 
