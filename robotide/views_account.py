@@ -11,6 +11,7 @@ from django.views.decorators.cache import never_cache
 from django.views.decorators.http import require_POST
 
 from robotide.models import ApiToken
+from runlogs.quota import usage_of
 
 NEW_TOKEN_KEY = "account_new_token"
 
@@ -44,6 +45,7 @@ def account(request):
             "form": form,
             "tokens": request.user.api_tokens.order_by("-created"),
             "new_token": new,
+            "log_usage": usage_of(request.user),
         },
     )
 

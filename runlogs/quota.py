@@ -21,6 +21,7 @@ from django.utils import timezone
 
 from programs.models import Run
 from runlogs import files
+from runlogs.notes import megabytes
 
 MB = 1024 * 1024
 TOTAL_AT_MOST = 4096 * MB
@@ -161,6 +162,14 @@ def compress_due(limit: int = 50) -> int:
 class Usage:
     used: int
     quota: int
+
+    @property
+    def used_text(self) -> str:
+        return megabytes(self.used)
+
+    @property
+    def quota_text(self) -> str:
+        return megabytes(self.quota)
 
     @property
     def percent(self) -> int:
