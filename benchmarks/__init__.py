@@ -21,4 +21,5 @@ BENCHMARKS = (
     "camera",
     "gateway",
     "fleet",
+    "classroom",
 )

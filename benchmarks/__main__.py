@@ -1,6 +1,7 @@
 """Run the benchmarks (all, or those named) and print one table of figures and targets.
 
     .venv/bin/python -m benchmarks [idle_memory start_overhead api_roundtrips languages throughput]
+    CLASSROOM_BENCH_QUICK=1 .venv/bin/python -m benchmarks classroom   # its --quick
 
 Figures are printed, never asserted: the exit status is 0 however they compare with their
 targets, 1 only if a benchmark could not run at all.
