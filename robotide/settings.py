@@ -254,7 +254,8 @@ DATA_UPLOAD_MAX_NUMBER_FILES = 10
 # in the server or an agent: at most BLOCKS_WORKERS at once, each within an address space of
 # BLOCKS_WORKER_MEMORY_MB, and BLOCKS_WORKER_SECONDS of CPU and of wall time a program.
 BLOCKS_WORKERS = env_int("ROBOTIDE_BLOCKS_WORKERS", 2)
-BLOCKS_WORKER_MEMORY_MB = env_int("ROBOTIDE_BLOCKS_WORKER_MEMORY_MB", 512)
+# Blocks at programs.blocks' caps took under 100 MB of address space here.
+BLOCKS_WORKER_MEMORY_MB = env_int("ROBOTIDE_BLOCKS_WORKER_MEMORY_MB", 256)
 BLOCKS_WORKER_SECONDS = env_int("ROBOTIDE_BLOCKS_WORKER_SECONDS", 10)
 
 # Failed sign-ins within `window_seconds` lock a (user name, address) pair after `failures`, an
