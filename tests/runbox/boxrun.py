@@ -22,6 +22,7 @@ sys.path.insert(0, str(ROOT))
 
 from runbox import SYSTEM_PATH, launcher, seccomp  # noqa: E402
 from runbox.box import Launch, Listener, make_box  # noqa: E402
+from runbox.cgroups import CgroupSupport, detect  # noqa: E402
 from runbox.isolation import Policy  # noqa: E402
 from runbox.supervisor import RunProcess  # noqa: E402
 from runbox.watch import RunWatch  # noqa: E402
@@ -52,7 +53,7 @@ async def run(spec: dict) -> dict:
     sockets = folder / "sockets"
     sockets.mkdir()
     api = listen_as_the_agent(sockets / "api.sock")
-    in_force = policy.resolve(clients)
+    in_force = policy.resolve(clients, cgroups_here())
     limits = launcher.Limits.from_settings(spec.get("limits", {}))
     listeners = [] if policy.network == "none" else [Listener("tcp:7010", Echo().serve)]
     box = make_box(
@@ -94,7 +95,14 @@ async def run(spec: dict) -> dict:
         "log": log, "seconds": time.monotonic() - started, "left": left,
         "rootless": in_force.rootless, "started": process.started,
         "api_folder": api_folder_after(sockets, api),
+        "isolation": in_force.describe(limits), "runs_at_once": in_force.runs_at_once,
     }  # fmt: skip
+
+
+def cgroups_here() -> CgroupSupport:
+    """What this machine says of cgroups, but never available: the runs here get none."""
+    support = detect()
+    return CgroupSupport(None, why="boxrun makes no cgroups") if support.available else support
 
 
 def listen_as_the_agent(path: Path) -> socket.socket:
