@@ -8,6 +8,7 @@ import subprocess
 import sys
 import threading
 import time
+import zlib
 from pathlib import Path
 
 import pytest
@@ -161,3 +162,43 @@ def read_lines(procs: list[subprocess.Popen]) -> list[str]:
     for reader in readers:
         reader.join(120)  # only a kernel that never answers waits this long
     return lines
+
+
+def test_fake_v2_parent_within_the_servers_own_limit(tmp_path):
+    """cgroup v2, on a FAKE tree of plain files (this machine's v2 hierarchy has no memory
+    controller): the parent beside the agent's leaf, controllers handed down to it, its limits
+    in v2's files, its memory a share of the server's own cgroup's 2 GB (less than the RAM)."""
+    from tests.runbox.test_cgroups import fake_v2
+
+    proc = fake_v2(tmp_path)
+    own = tmp_path / "cg" / "robotide.service"
+    (own / "memory.max").write_text(f"{2048 * MB}\n")
+    support = runs_cgroups(Share(0.5, 1000, 25), "/srv/robotide", detect(str(proc)))
+    parent = own / f"robotide-runs-{zlib.crc32(b'/srv/robotide'):08x}"
+    assert support.folders() == [parent]
+    assert (own / "robotide-agent" / "cgroup.procs").read_text() == "111\n222\n"
+    for folder in (own, parent):
+        assert (folder / "cgroup.subtree_control").read_text() == "+memory\n+pids\n+cpu\n"
+    assert (parent / "memory.max").read_text() == f"{1024 * MB}\n"
+    assert (parent / "pids.max").read_text() == "1000\n"
+    assert (parent / "cpu.weight").read_text() == "25\n"
+    assert support.describe() == (
+        "cgroup v2 (memory+swap, pids, cpu, kill); all runs together at most 1024 MB of memory"
+        " and 1000 processes, CPU weight 25 (the server's 100)"
+    )
+    run = RunCgroup.create("run-3", support, memory_bytes=256 * MB, pids=64)
+    assert run.folders() == [parent / "run-3"]
+    assert (parent / "run-3" / "memory.max").read_text() == f"{256 * MB}\n"
+
+
+def test_settings_out_of_range_are_refused_saying_which():
+    for values, said in (
+        ({"memory_share": 0}, "memory share"),
+        ({"memory_share": 1.5}, "memory share"),
+        ({"pids": 0}, "process limit"),
+        ({"cpu_weight": 0}, "CPU weight"),
+        ({"cpu_weight": 10_001}, "CPU weight"),
+    ):
+        with pytest.raises(ValueError, match=said):
+            Share.from_settings(values)
+    assert Share.from_settings({}) == Share(0.6, 4096, 50)
