@@ -141,8 +141,10 @@ class RobotAgent:
         self._shows_snapshot_due = True
         self.layer = get_channel_layer()
         # This robotide's (its data folder's) runs of this robot, among all on the machine.
+        # A dot ends the robot's name (a slug has none): robot "pi" sweeping its leftovers at
+        # its start must not take robot "pi-2"'s live runs for its own.
         instance = zlib.crc32(str(settings.DATA_DIR).encode())
-        self.cgroup_prefix = f"{instance:08x}-{name}-"
+        self.cgroup_prefix = f"{instance:08x}-{name}."
         self.driver: rhal.Robot | None = None
         self.link_error: str | None = None
         self.api = RobotApi(self)

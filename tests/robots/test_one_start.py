@@ -33,11 +33,11 @@ async def asked(source: str = PROGRAM) -> Run:
     return run
 
 
-async def send_start(run: Run) -> None:
+async def send_start(run: Run, source: str = PROGRAM, robot: str = "sim") -> None:
     """The web tier's run.start for `run` (as robots.runs makes it)."""
-    message = {"type": "run.start", "run_id": run.pk, "language": "python", "source": PROGRAM,
+    message = {"type": "run.start", "run_id": run.pk, "language": "python", "source": source,
                "filename": "main.py", "args": [], "user": "mallory"}  # fmt: skip
-    await get_channel_layer().send(agent_channel("sim"), message)
+    await get_channel_layer().send(agent_channel(robot), message)
 
 
 async def handled(agent: RobotAgent) -> None:
@@ -63,8 +63,8 @@ def starts_in_log(run: Run) -> int:
 
 
 @contextlib.asynccontextmanager
-async def serving():
-    agent = RobotAgent("sim")
+async def serving(robot: str = "sim"):
+    agent = RobotAgent(robot)
     task = asyncio.create_task(agent.serve())
     try:
         await asyncio.wait_for(agent.ready.wait(), 15)

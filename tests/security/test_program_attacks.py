@@ -378,7 +378,7 @@ for pid in children:
     run, log = attack(app, source, robot=heavy)
     lines = [line for line in log.splitlines() if line.startswith("CG ")]
     # Its name: the run's; on cgroup v2 (no renames) a box made ahead keeps its own.
-    name = f"-heavy-run-{run['id']}" if cgroups.detect().version == "v1" else "-heavy-"
+    name = f"-heavy.run-{run['id']}" if cgroups.detect().version == "v1" else "-heavy."
     assert len(lines) == 8 and len(set(lines)) == 1 and name in lines[0], log
 
 
