@@ -60,9 +60,23 @@ async def tell_run_changed(run_id: int, robot_name: str) -> None:
 
 
 async def ask_agent(robot_name: str, type: str, timeout: float = 3.0, **data) -> dict:
+    reply_to = await request_agent(robot_name, type, **data)
+    return await agent_reply(robot_name, reply_to, timeout)
+
+
+async def request_agent(robot_name: str, type: str, **data) -> str:
+    """The first half of ``ask_agent``: the message sent; the channel its reply comes to. Apart
+    so that a caller may send while it holds a lock and wait for the reply after letting go
+    (robots.stops: presses reach the agent in the order they are recorded)."""
     layer = get_channel_layer()
     reply_to = await layer.new_channel()
     await layer.send(agent_channel(robot_name), {"type": type, "reply_to": reply_to, **data})
+    return reply_to
+
+
+async def agent_reply(robot_name: str, reply_to: str, timeout: float = 3.0) -> dict:
+    """The second half of ``ask_agent``: AgentUnavailable if no reply comes in time."""
+    layer = get_channel_layer()
     try:
         reply = await asyncio.wait_for(layer.receive(reply_to), timeout)
     except TimeoutError:
@@ -125,5 +139,7 @@ def begin_soon(coro_fn, *args) -> None:
 
 tell_agent_sync = blocking(send_to_agent)
 ask_agent_sync = blocking(ask_agent)
+request_agent_sync = blocking(request_agent)
+agent_reply_sync = blocking(agent_reply)
 announce_robot_sync = blocking(announce_robot)
 reconfigure_sync = blocking(reconfigure)

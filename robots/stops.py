@@ -5,16 +5,23 @@ Whoever may see a robot may press its emergency stop unless its owner chose othe
 pressed it too since it was last resumed: staff and its owner only). Every press and
 resume is recorded (``RobotStop``: who, when, through what, the runs it ended), also when
 the robot's agent could not be reached.
+
+The record comes first. A press and a resume of one robot are decided, recorded and sent to
+its agent one at a time, under a lock on the robot (``_one_at_a_time``): a press is in the
+records before its agent hears of it, so nobody may resume past a press still on its way, and
+the agent hears presses and resumes in the order they are recorded. A press's reply (the runs
+it ended) is waited for after the lock is let go, then added to its record.
 """
 
 import contextlib
 
 from django.core.exceptions import PermissionDenied
+from django.db import transaction
 from django.utils.translation import gettext as _
 
 from programs.models import Run
 from robots import run_queue
-from robots.bus import AgentUnavailable, ask_agent_sync, tell_agent_sync
+from robots.bus import AgentUnavailable, agent_reply_sync, request_agent_sync, tell_agent_sync
 from robots.models import Robot, RobotStop
 
 
@@ -25,12 +32,24 @@ def press(user, robot: Robot, via: str) -> RobotStop:
             _("Only %(who)s may press %(robot)s's emergency stop.")
             % {"who": robot.get_estop_by_display(), "robot": robot.name}
         )
+    with transaction.atomic():
+        _one_at_a_time(robot)
+        record = _record(robot, "estop", user, via)
+        try:
+            reply_to = request_agent_sync(robot.name, "robot.estop", by=user.get_username())
+        except Exception as exc:  # the channel layer away: the press stands, recorded
+            unsent = AgentUnavailable(str(exc))
+        else:
+            unsent = None
     try:
-        reply = ask_agent_sync(robot.name, "robot.estop", by=user.get_username())
+        if unsent is not None:
+            raise unsent
+        reply = agent_reply_sync(robot.name, reply_to)
     except AgentUnavailable as exc:
-        _record(robot, "estop", user, via, note=f"its agent was not reached: {exc}")
+        _add_to(record, note=f"its agent was not reached: {exc}")
         raise
-    return _record(robot, "estop", user, via, runs=_described(reply.get("runs", [])))
+    _add_to(record, runs=_described(reply.get("runs", [])))
+    return record
 
 
 def may_resume(user, robot: Robot, pressed: RobotStop | None) -> bool:
@@ -48,17 +67,23 @@ def may_resume(user, robot: Robot, pressed: RobotStop | None) -> bool:
 
 
 def resume(user, robot: Robot, via: str) -> int:
-    """The robot may move again and its queue moves: how many runs were waiting, held."""
-    pressed = RobotStop.pressed(robot.pk)
-    if not may_resume(user, robot, pressed):
-        raise PermissionDenied(
-            _("Only staff, the robot's owner or whoever pressed its emergency stop resume it.")
-        )
-    if pressed is not None:
-        _record(robot, "resume", user, via)
-    count = run_queue.unhold(robot)
-    with contextlib.suppress(Exception):  # the agent away: back, it finds it resumed
-        tell_agent_sync(robot.name, "robot.resume")
+    """The robot may move again and its queue moves: how many runs were waiting, held.
+    Decided under the lock presses take, so a press recorded (even one whose agent has not
+    answered yet) is seen; the agent is told before the lock goes, so a press recorded after
+    this resume reaches it after the resume."""
+    with transaction.atomic():
+        _one_at_a_time(robot)
+        pressed = RobotStop.pressed(robot.pk)
+        if not may_resume(user, robot, pressed):
+            raise PermissionDenied(
+                _("Only staff, the robot's owner or whoever pressed its emergency stop resume it.")
+            )
+        if pressed is not None:
+            _record(robot, "resume", user, via)
+        count = Run.queue_of(robot.pk).filter(reason=Run.HELD).count()
+        with contextlib.suppress(Exception):  # the agent away: back, it finds it resumed
+            tell_agent_sync(robot.name, "robot.resume")
+    run_queue.unhold(robot)  # the pages hear of it once the resume is committed
     return count
 
 
@@ -66,11 +91,24 @@ def recent(robot: Robot, count: int = 10) -> list[RobotStop]:
     return list(RobotStop.objects.filter(robot=robot)[:count])
 
 
-def _record(robot, kind: str, user, via: str, runs=(), note: str = "") -> RobotStop:
+def _one_at_a_time(robot: Robot) -> None:
+    """Within a transaction: until it ends, no other press or resume of the robot is decided.
+    PostgreSQL: the robot's row locked. SQLite: transactions begin IMMEDIATE (robotide.settings),
+    taking the database's write lock, and select_for_update is a no-op there."""
+    list(Robot.objects.select_for_update().filter(pk=robot.pk).values_list("pk", flat=True))
+
+
+def _record(robot, kind: str, user, via: str) -> RobotStop:
     return RobotStop.objects.create(
-        robot=robot, kind=kind, user=user, username=user.get_username(), via=via,
-        runs=list(runs), note=note[:300],
-    )  # fmt: skip
+        robot=robot, kind=kind, user=user, username=user.get_username(), via=via
+    )
+
+
+def _add_to(record: RobotStop, runs=(), note: str = "") -> None:
+    """What the agent answered (the runs it ended), or why it did not, added to a press's
+    record once its reply came; only those fields, whatever else changed meanwhile."""
+    record.runs, record.note = list(runs), note[:300]
+    record.save(update_fields=["runs", "note"])
 
 
 def _described(run_ids: list[int]) -> list[dict]:
