@@ -137,7 +137,7 @@ def to_python(source_json: str) -> str:
         raise BlocksError(_too_long())
     try:
         compile(code, "<blocks>", "exec")
-    except (SyntaxError, RecursionError, MemoryError) as exc:
+    except (SyntaxError, RecursionError) as exc:  # a MemoryError is the worker's to say
         # Python's own limits, e.g. more than 20 loops inside each other.
         raise BlocksError(
             _("This blocks program cannot run as Python: %(why)s.") % {"why": exc}

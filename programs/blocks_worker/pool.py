@@ -63,6 +63,7 @@ class Worker:
             cwd=SOURCE_ROOT, env={"PATH": SYSTEM_PATH, "LC_ALL": "C.UTF-8"},
         )  # fmt: skip
         self.killed = False
+        self.ended_before_asked = False
 
     @property
     def alive(self) -> bool:
@@ -74,9 +75,13 @@ class Worker:
         watchdog = threading.Timer(seconds, self.kill)
         watchdog.start()
         try:
-            self.process.stdin.write(json.dumps(request).encode() + b"\n")
+            try:
+                self.process.stdin.write(json.dumps(request).encode() + b"\n")
+            except BrokenPipeError:  # it had ended before (found dead between two polls)
+                self.ended_before_asked = True
+                return None
             line = self._answer_line()
-        except OSError:  # it ended: a broken pipe
+        except OSError:
             return None
         finally:
             watchdog.cancel()
@@ -124,6 +129,10 @@ class Pool:
         try:
             worker = self._take()
             answer = worker.ask(request, self.seconds)
+            if answer is None and worker.ended_before_asked:  # not this program's doing
+                worker.close()
+                worker = Worker(self.memory, self.seconds)
+                answer = worker.ask(request, self.seconds)
             if answer is None or answer["retire"]:
                 worker.close()
             else:
