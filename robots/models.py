@@ -50,7 +50,7 @@ class Robot(models.Model):
     agent_started = models.DateTimeField(_("agent started"), null=True, blank=True, editable=False)
     isolation = models.CharField(
         _("isolation"),
-        max_length=200,
+        max_length=1000,  # runbox.isolation.InForce.describe: a rootless box says a lot
         blank=True,
         editable=False,
         help_text=_("What its agent gives each run"),
