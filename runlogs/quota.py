@@ -134,13 +134,10 @@ def settle(run_id: int) -> None:
         Run.objects.filter(pk=run_id, log_pruned_at__isnull=True).update(log_bytes=size)
 
 
-def compress(run_id: int) -> bool:
-    """Run ``run_id``'s ended log gzipped (made aside, then put in place holding the lock,
-    unless it was pruned meanwhile): whether it was."""
+def put_compressed(run_id: int, part) -> bool:
+    """Run ``run_id``'s log made gzip aside (runlogs.files.compress_aside) put in place,
+    holding the lock, unless it was pruned meanwhile: whether it was."""
     path = Run.log_path_of(run_id)
-    part = files.compress_aside(path)
-    if part is None:
-        return False
     with quota_lock():
         if not Run.objects.filter(pk=run_id, log_pruned_at__isnull=True).exists():
             files.remove(path)  # the part too: pruned while it was made
@@ -150,12 +147,12 @@ def compress(run_id: int) -> bool:
     return True
 
 
-def compress_due(limit: int = 50) -> int:
-    """Ended logs not compressed yet whose time has come (a leftover of an agent that stopped
-    before it compressed its own): how many were."""
+def due_for_compression(limit: int = 50) -> list[int]:
+    """Ended runs whose logs are not compressed yet and whose time has come (a leftover of an
+    agent that stopped before it compressed its own among them)."""
     due = timezone.now() - timedelta(seconds=settings.RUN_LOG_COMPRESS_AFTER)
     runs = Run.objects.filter(prunable(), log_gzipped=False, ended__lte=due).order_by("ended")
-    return sum(compress(run_id) for run_id in runs.values_list("pk", flat=True)[:limit])
+    return list(runs.values_list("pk", flat=True)[:limit])
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,11 @@
 """A run's process whose log keeps within its owner's quota and the total (runlogs.quota).
 
-The log grows in grants asked off the event loop, ahead of need. When output comes that the
-grant does not cover, the program's pipes stop being read until the answer (the program waits
-on its writes; nothing is lost or reordered); when no room is left it ends, as at the per-run
-size cap, saying why in its log. Once it ended, its log counts the bytes it takes and is
-compressed after ``RUN_LOG_COMPRESS_AFTER``. The agent makes its runs' processes of this class.
+The log grows in grants asked ahead of need, on the database's thread, never on the event
+loop. When output comes that the grant does not cover, the program's pipes stop being read
+until the answer (the program waits on its writes; nothing is lost or reordered); when no room
+is left the run ends, as at the per-run size cap, saying why in its log. Once it ended, its log
+counts the bytes it takes, and it is compressed after ``RUN_LOG_COMPRESS_AFTER`` (gzip in a
+thread of its own). The agent makes its runs' processes of this class.
 """
 
 import asyncio
@@ -12,35 +13,20 @@ import logging
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from channels.db import database_sync_to_async
 from django.conf import settings
-from django.db import close_old_connections, connections
 
+from programs.models import Run
 from runbox.supervisor import RunProcess
-from runlogs import quota
+from runlogs import files, quota
 
-# Before the first grant's answer a run may write this much (its first lines wait for nothing).
+# A run may write this much before its first grant (beyond a full quota at worst, while it
+# asks): its first lines wait for nothing.
 FIRST_ALLOWANCE = 64 * 1024
 log = logging.getLogger(__name__)
 
-# Grants in one thread, compression in another: a grant never waits behind a big log's gzip.
-_GRANTS = ThreadPoolExecutor(max_workers=1, thread_name_prefix="runlogs-grant")
-_STORAGE = ThreadPoolExecutor(max_workers=1, thread_name_prefix="runlogs-compress")
-
-
-def _in_database_thread(job, *args):
-    close_old_connections()
-    try:
-        return job(*args)
-    finally:
-        connections.close_all()
-
-
-def _stored(job, run_id: int) -> None:
-    """A storage job's failure is the server's log's to say: the run has ended."""
-    try:
-        _in_database_thread(job, run_id)
-    except Exception:
-        log.exception("run %s: its log could not be stored (%s)", run_id, job.__name__)
+_GZIP = ThreadPoolExecutor(max_workers=1, thread_name_prefix="runlogs-gzip")
+_background: set[asyncio.Task] = set()  # held until done (the loop keeps only weak references)
 
 
 def run_id_of(log_path: Path | None) -> int | None:
@@ -56,15 +42,17 @@ class QuotaRunProcess(RunProcess):
         super().__init__(*args, **kwargs)
         self._run_id: int | None = None
         self._granted = FIRST_ALLOWANCE
-        self._asking: asyncio.Future | None = None
+        self._asking: asyncio.Task | None = None
         self._held: list[tuple[bytes, list[bytes], bool]] = []  # output waiting for a grant
         self._refused = ""
         self._finish_when_granted = False
+        self._ahead = 0
 
     async def begin(self, launch=None, gate=None, *, log_path=None, on_output=None) -> None:
         self._run_id = run_id_of(log_path or self.log_path)
-        if self._run_id is not None:
-            self._ask(0)  # its first grant, asked before it says anything
+        # A grant is asked once it wrote half its first allowance: most runs never ask,
+        # and none asks while it starts (the database's thread then claims it).
+        self._ahead = min(quota.step(), FIRST_ALLOWANCE) // 2
         await super().begin(launch, gate, log_path=log_path, on_output=on_output)
 
     # -- output, within its grant ---------------------------------------------------------
@@ -78,7 +66,7 @@ class QuotaRunProcess(RunProcess):
         size = sum(len(line) + 3 for line in lines)  # "t " + line + "\n"
         if force or self._written + size <= self._granted:
             super()._append(tag, lines, force)
-            if self._written > self._granted - quota.step() // 2:
+            if self._granted - self._written < self._ahead:
                 self._ask(0)  # ahead: a steady writer need not wait
             return
         if self._written + size > self.max_log_bytes:  # the per-run cap says so, as ever
@@ -92,14 +80,14 @@ class QuotaRunProcess(RunProcess):
     def _ask(self, need: int) -> None:
         if self._asking is not None:
             return
-        loop = asyncio.get_running_loop()
-        self._asking = loop.run_in_executor(
-            _GRANTS, _in_database_thread, quota.grant,
-            self._run_id, self._written, need, self.max_log_bytes,
-        )  # fmt: skip
+        self._asking = asyncio.ensure_future(
+            database_sync_to_async(quota.grant)(
+                self._run_id, self._written, need, self.max_log_bytes
+            )
+        )
         self._asking.add_done_callback(self._answered)
 
-    def _answered(self, asked: asyncio.Future) -> None:
+    def _answered(self, asked: asyncio.Task) -> None:
         self._asking = None
         try:
             answer = asked.result()
@@ -107,6 +95,9 @@ class QuotaRunProcess(RunProcess):
             log.exception("run %s: its log's quota could not be read", self._run_id)
             answer = quota.Grant(self.max_log_bytes)
         self._granted, self._refused = answer.limit, answer.refused
+        # Asked ahead again only while grants come whole: near a full quota, only when needed.
+        step = quota.step()
+        self._ahead = step // 2 if answer.limit - self._written >= step // 2 else 0
         held, self._held = self._held, []
         for tag, lines, force in held:
             self._append(tag, lines, force)  # may wait again, for the next grant
@@ -128,8 +119,10 @@ class QuotaRunProcess(RunProcess):
         transport = getattr(self, "_transport", None)
         for fd in (1, 2):
             pipe = transport.get_pipe_transport(fd) if transport is not None else None
-            if pipe is not None:
-                pipe.resume_reading() if not pause else pipe.pause_reading()
+            if pipe is not None and pause:
+                pipe.pause_reading()
+            elif pipe is not None:
+                pipe.resume_reading()
 
     # -- its end --------------------------------------------------------------------------
 
@@ -140,18 +133,33 @@ class QuotaRunProcess(RunProcess):
         self._finish_when_granted = False
         super()._finished()
         if self._run_id is not None:
-            self._store_when_ended(self._run_id)
-
-    def _store_when_ended(self, run_id: int) -> None:
-        loop = asyncio.get_running_loop()
-        loop.run_in_executor(_STORAGE, _stored, quota.settle, run_id)
-        loop.call_later(
-            settings.RUN_LOG_COMPRESS_AFTER,
-            lambda: loop.run_in_executor(_STORAGE, _stored, compress_ended, run_id),
-        )
+            _in_background(store_ended(self._run_id))
 
 
-def compress_ended(run_id: int) -> None:
-    """This log, and any an agent that stopped early left uncompressed."""
-    quota.compress(run_id)
-    quota.compress_due()
+def _in_background(coroutine) -> None:
+    task = asyncio.ensure_future(coroutine)
+    _background.add(task)
+    task.add_done_callback(_background.discard)
+
+
+async def store_ended(run_id: int) -> None:
+    """An ended log: counted as the bytes it takes, then compressed in its time, with any an
+    agent that stopped early left uncompressed."""
+    try:
+        await database_sync_to_async(quota.settle)(run_id)
+        await asyncio.sleep(settings.RUN_LOG_COMPRESS_AFTER)
+        await compress(run_id)
+        for leftover in await database_sync_to_async(quota.due_for_compression)():
+            await compress(leftover)
+    except Exception:  # the run has ended: the server's log says what went wrong
+        log.exception("run %s: its log could not be stored", run_id)
+
+
+async def compress(run_id: int) -> bool:
+    """gzip in its own thread (a big log takes a while), put in place on the database's."""
+    part = await asyncio.get_running_loop().run_in_executor(
+        _GZIP, files.compress_aside, Run.log_path_of(run_id)
+    )
+    if part is None:  # no plain log (compressed already, pruned, never written)
+        return False
+    return await database_sync_to_async(quota.put_compressed)(run_id, part)
