@@ -19,6 +19,7 @@ from django.utils.translation import pgettext
 import rhal
 from rhal.camera import CameraSettings
 from rhal.options import Option, driver_options, url_options
+from robots.fair_shares import robot_setting
 from robots.host_services import check_speech_settings
 from robots.models import RUN_SETTINGS, Robot
 from runbox.isolation import IsolationUnavailable, Policy
@@ -41,6 +42,7 @@ def check_settings(url: str, settings: dict) -> None:
     robot = Robot(url=url, settings=settings)
     try:
         Limits.from_settings(settings.get("limits", {}))
+        robot_setting(settings)  # runs_at_once
         CameraSettings.parse(settings.get("camera"))
         check_speech_settings(settings.get("speech"))
         Policy.from_settings(robot.run_isolation(django_settings.RUN_ISOLATION))

@@ -97,10 +97,13 @@ def is_share_wait(reason: str) -> bool:
     return reason.startswith(WAITING)
 
 
+USER_WAIT = f"{WAITING}you already have"
+
+
 def user_reason(count: int, limit: int) -> str:
     # Stored in English, as run reasons are (data, like the run's log).
     runs = "run" if count == 1 else "runs"
-    return f"{WAITING}you already have {count} {runs} going (your limit is {limit})"
+    return f"{USER_WAIT} {count} {runs} going (your limit is {limit})"
 
 
 ROBOT_FULL = f"{WAITING}the robot runs at most "
@@ -164,6 +167,16 @@ def _admitted(run: Run, queued: bool) -> Admission:
     return Admission.ADMITTED if changed else Admission.GONE
 
 
+def reason_shown(reason: str, mine: bool) -> str:
+    """A share wait's reason as someone other than the run's owner reads it (staff, the
+    robot's owner): it is said to the owner ("you already have...")."""
+    if mine or not reason.startswith(USER_WAIT):
+        return reason
+    return reason.replace(USER_WAIT, f"{WAITING}its owner already has", 1).replace(
+        "(your limit", "(their limit", 1
+    )
+
+
 def robots_to_look_again(run_id: int) -> list[str]:
     """A run ended: the robots other than its own whose queues hold runs of its owner waiting
     for a share (their agents look again; its own agent does anyway)."""
@@ -198,22 +211,20 @@ class InForce:
         if self.runs_per_user is None:
             return _("You may have any number of runs going at once.")
         return ngettext(
-            "You may have %(limit)s run going at once, on all robots (%(going)s now); more wait"
-            " in line.",
-            "You may have %(limit)s runs going at once, on all robots (%(going)s now); more wait"
-            " in line.",
+            "You may have %(limit)s run going at once, on all robots; more wait in line.",
+            "You may have %(limit)s runs going at once, on all robots; more wait in line.",
             self.runs_per_user,
-        ) % {"limit": self.runs_per_user, "going": self.yours_going}
+        ) % {"limit": self.runs_per_user}
 
     @property
     def robot_words(self) -> str:
         if self.runs_at_once is None:
             return _("This robot runs any number of programs at once.")
         return ngettext(
-            "This robot runs at most %(limit)s program at once (%(going)s now).",
-            "This robot runs at most %(limit)s programs at once (%(going)s now).",
+            "This robot runs at most %(limit)s program at once, whoever's.",
+            "This robot runs at most %(limit)s programs at once, whoever's.",
             self.runs_at_once,
-        ) % {"limit": self.runs_at_once, "going": self.robot_going}
+        ) % {"limit": self.runs_at_once}
 
 
 def in_force(user, robot: Robot) -> InForce:

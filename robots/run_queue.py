@@ -495,9 +495,17 @@ def queue_rows(user, robot: Robot) -> list[dict]:
         rows.append({
             "rank": rank, "place": in_line(rank), "run": run if shown else None,
             "linked": run.pk in visible, "mine": run.owner_id == user.pk,
+            "why": _why(run, user) if shown else "",
             "can_cancel": shown, "can_move": manager, "moves": moves,
         })  # fmt: skip
     return rows
+
+
+def _why(run: Run, user) -> str:
+    """What a run waits for, when not the robot itself: a share (fair_shares)."""
+    if not fair_shares.is_share_wait(run.reason):
+        return ""
+    return fair_shares.reason_shown(run.reason, run.owner_id == user.pk)
 
 
 def held(robot: Robot) -> bool:

@@ -14,7 +14,7 @@ from django.views.decorators.http import require_POST
 from programs.access import get_program_for_user, programs_for_user, runs_for_user
 from programs.models import Run, in_line
 from robotide.security import plain_number
-from robots import gateway_views, run_queue, stops
+from robots import fair_shares, gateway_views, run_queue, stops
 from robots.bus import AgentUnavailable, ask_agent_sync, reconfigure_sync
 from robots.camera import has_camera
 from robots.driver_settings import current_values
@@ -90,6 +90,7 @@ def queue_context(user, robot) -> dict:
         "queue": run_queue.queue_rows(user, robot),
         "queue_held": run_queue.held(robot),
         "can_manage_queue": run_queue.may_manage(user, robot),
+        "shares": fair_shares.in_force(user, robot),
     }
 
 
