@@ -10,7 +10,7 @@ from pydantic import field_validator, model_validator
 import rhal
 from programs.api import Error
 from robotide.schemas import Body
-from robots import fair_shares, stops
+from robots import disclosure, fair_shares, stops
 from robots.bus import announce_robot_sync, ask_agent_sync, reconfigure_sync
 from robots.driver_settings import check_settings, known_driver
 from robots.models import Robot, get_robot_for_user, robots_for_user
@@ -46,8 +46,11 @@ class RobotPatch(Body):
 
 class RobotOut(Schema):
     name: str
-    url: str
-    settings: dict
+    url: str = Field(
+        description="its driver URL for its owner and staff (a password masked); its driver"
+        " alone for others, e.g. pioneer://"
+    )
+    settings: dict = Field(description="for its owner and staff; {} for others")
     description: str
     online: bool = Field(description="its agent sent a heartbeat within the last few seconds")
     last_seen: str | None = Field(None, description="its agent's last heartbeat")
@@ -62,6 +65,14 @@ class RobotOut(Schema):
         None, description="runs this robot has going at once, whoever's; null: no limit"
     )
     runs_going: int = Field(0, description="runs going on this robot now")
+
+    @staticmethod
+    def resolve_url(robot, context):
+        return disclosure.url_shown(context["request"].user, robot)
+
+    @staticmethod
+    def resolve_settings(robot, context):
+        return disclosure.settings_shown(context["request"].user, robot)
 
     @staticmethod
     def resolve_last_seen(robot):
