@@ -14,7 +14,7 @@ from django.views.decorators.http import require_POST
 from programs.access import get_program_for_user, programs_for_user, runs_for_user
 from programs.models import Run, in_line
 from robotide.security import plain_number
-from robots import fair_shares, gateway_views, run_queue, stops
+from robots import disclosure, fair_shares, gateway_views, run_queue, stops
 from robots.bus import AgentUnavailable, ask_agent_sync, reconfigure_sync
 from robots.camera import has_camera
 from robots.driver_settings import current_values
@@ -29,7 +29,10 @@ CAMERA_ASKS = threading.BoundedSemaphore(2)
 
 @login_required
 def robot_list(request: HttpRequest) -> HttpResponse:
-    return render(request, "robots/list.html", {"robots": robots_for_user(request.user)})
+    robots = list(robots_for_user(request.user))
+    for robot in robots:  # its driver alone, but to its owner and staff
+        robot.url_shown = disclosure.url_shown(request.user, robot)
+    return render(request, "robots/list.html", {"robots": robots})
 
 
 @login_required
@@ -39,7 +42,10 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
         "robot": robot,
         "buttons": robot.buttons.all(),
         "can_configure": robot.configurable_by(request.user),
-        "options": current_values(robot),
+        "url_shown": disclosure.url_shown(request.user, robot),
+        "sees_setup": disclosure.sees_setup(request.user, robot),
+        # Its settings' values (device paths, hosts...) for its owner and staff only.
+        "options": current_values(robot) if disclosure.sees_setup(request.user, robot) else [],
         "running": runs_for_user(request.user).filter(robot=robot, state__in=Run.ACTIVE),
         "programs": programs_for_user(request.user),
         **queue_context(request.user, robot),
