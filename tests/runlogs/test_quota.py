@@ -143,6 +143,33 @@ async def test_a_log_that_would_outgrow_what_is_left_ends_its_run(robot_on, sett
     assert run.log_pruned_at is not None  # the first, ended, made room for the second
 
 
+NUMBERED_FLOOD = """
+import sys
+n = 0
+while True:
+    sys.stdout.write(f"{n} " + "y" * 200 + "\\n")
+    n += 1
+"""
+
+
+async def test_two_floods_at_once_share_what_is_left_and_lose_no_line_before_it(robot_on, settings):
+    """Their output waits in its pipes while a grant is asked: each log is every line the
+    program wrote, in order, up to where the quota ended it."""
+    settings.RUN_LOG_QUOTA_PER_USER = 2 * MB
+    settings.RUN_LOG_QUOTA_TOTAL = 1024 * MB
+    settings.RUN_LOG_COMPRESS_AFTER = 3600.0
+    _peer, _agent, robot, student = await robot_on("sim")
+    runs = [await run_program(student, robot, NUMBERED_FLOOD) for _ in range(2)]
+    runs = [await finished(run, timeout=60) for run in runs]
+    assert all("run log quota reached (2 MB" in run.reason for run in runs), runs
+    assert on_disk(runs) <= 2 * MB + 2 * (64 + 1) * 1024  # each: its first 64 KB unasked
+    for run in runs:
+        lines = files.open_log(run.log_path).file.read().splitlines()
+        numbers = [int(line[2:].split(b" ")[0]) for line in lines if line.startswith(b"o ")]
+        assert numbers == list(range(len(numbers))) and len(numbers) > 100
+        assert lines[-2].startswith(b"s [robotide] run log quota reached"), lines[-3:]
+
+
 async def test_ended_logs_are_compressed_in_the_background_and_read_the_same(
     robot_on, small_quotas
 ):
