@@ -39,6 +39,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -337,14 +338,24 @@ def own_cpu() -> float:
 # -- figures -------------------------------------------------------------------------------------
 
 
-def ms_figures(samples: list) -> dict:
+def ms_figures(samples: list, good=200) -> dict:
+    """n, p50, p99 of (start, ms, answer, ...) samples; how many were answered otherwise than
+    `good`, and every answer counted."""
     times = [s[1] for s in samples]
+    answers = Counter(s[2] for s in samples)
     return {
         "n": len(times),
-        "failed": sum(1 for s in samples if not s[2]),
+        "failed": len(times) - answers[good],
+        "answers": answers,
         "p50": percentile(times, 50) if times else None,
         "p99": percentile(times, 99) if times else None,
     }
+
+
+def others(figures: dict, good=200) -> str:
+    """The answers other than `good`, counted: '2 x 502, 1 x ReadTimeout'."""
+    counted = [(n, a) for a, n in figures["answers"].most_common() if a != good]
+    return ", ".join(f"{n} x {a}" for n, a in counted)
 
 
 def phase_figures(classroom: Classroom, memory: MemorySampler, phase: Phase) -> dict:
@@ -357,8 +368,7 @@ def phase_figures(classroom: Classroom, memory: MemorySampler, phase: Phase) -> 
         "pages": ms_figures(within(record.pages, window)),
         "estop": ms_figures(within(record.estops, window)),
         "resume": ms_figures(within(record.resumes, window)),
-        "runs": ms_figures([(t, ms, state == "finished") for t, ms, state, _ in asked]),
-        "run states": sorted({state for _, _, state, _ in asked}),
+        "runs": ms_figures(asked, good="finished"),
         "server end": server[-1] / MB if server else None,
         "server peak": max(server) / MB if server else None,
         "runs peak": max(runs) / MB if runs else None,
@@ -389,20 +399,21 @@ def figures_of(classroom: Classroom, memory: MemorySampler, after_mb: float | No
 
 def figures_of_phase(name: str, f: dict, phase: Phase) -> list[Figure]:
     pages, estop, runs = f["pages"], f["estop"], f["runs"]
+    ended = ", ".join(f"{n} {state}" for state, n in runs["answers"].most_common())
     aim = ()
     if name == "attack":
         aim = ("< 100 ms", None if estop["p99"] is None else estop["p99"] < 100)
     return [
         Figure(BENCH, f"{name}: page p50", pages["p50"], "ms"),
         Figure(BENCH, f"{name}: page p99 ({pages['n']} GETs, {pages['failed']} not 200)",
-               pages["p99"], "ms"),
+               pages["p99"], "ms", note=others(pages)),
         Figure(BENCH, f"{name}: e-stop p50", estop["p50"], "ms"),
         Figure(BENCH, f"{name}: e-stop p99 ({estop['n']} presses, {estop['failed']} not 200)",
-               estop["p99"], "ms", *aim),
+               estop["p99"], "ms", *aim, note=others(estop)),
         Figure(BENCH, f"{name}: resume p99 ({f['resume']['n']})", f["resume"]["p99"], "ms"),
         Figure(BENCH, f"{name}: run asked -> ended p50 ({runs['n']} runs)", runs["p50"], "ms"),
         Figure(BENCH, f"{name}: run asked -> ended p99 ({runs['failed']} not finished)",
-               runs["p99"], "ms", note="ended: " + ", ".join(f["run states"])),
+               runs["p99"], "ms", note=ended),
         Figure(BENCH, f"{name}: server RSS at its end", f["server end"], "MB"),
         Figure(BENCH, f"{name}: server RSS peak", f["server peak"], "MB"),
         Figure(BENCH, f"{name}: runs' RSS peak (summed)", f["runs peak"], "MB"),

@@ -29,7 +29,8 @@ ATTACK_TIMEOUT = 300.0  # s an attacker's request may take (a blocks compile too
 
 @dataclass
 class Record:
-    """What the clients timed: (wall-clock start, ms, ok, label) per sample."""
+    """What the clients timed: (wall-clock start, ms, answer, label) per sample; the answer
+    is the HTTP status, or the error's name."""
 
     pages: list = field(default_factory=list)
     estops: list = field(default_factory=list)
@@ -63,10 +64,10 @@ class Session:
 async def timed_get(session: Session, path: str, label: str, record: Record) -> None:
     started, t = time.time(), time.perf_counter()
     try:
-        ok = (await session.http.get(path)).status_code == 200
-    except httpx.HTTPError:
-        ok = False
-    record.pages.append((started, (time.perf_counter() - t) * 1000, ok, label))
+        answer = (await session.http.get(path)).status_code
+    except httpx.HTTPError as exc:
+        answer = type(exc).__name__
+    record.pages.append((started, (time.perf_counter() - t) * 1000, answer, label))
 
 
 class Student:
@@ -129,6 +130,8 @@ class Student:
             else:
                 self.last_run = int(answer.headers["X-Run"])
                 state = await self.wait_ended(self.last_run)
+                if state != "finished":
+                    state += await self.reason(self.last_run)
         except httpx.HTTPError as exc:
             state = type(exc).__name__
         record.runs.append((asked, (time.perf_counter() - t) * 1000, state, self.robot))
@@ -146,6 +149,19 @@ class Student:
             return "not ended: " + answer.json()["state"]
         return "not ended"
 
+    async def reason(self, run_id: int) -> str:
+        """Why a run did not finish, as the API says, and its last line on stderr (asked
+        only then)."""
+        why = ""
+        with contextlib.suppress(httpx.HTTPError, ValueError, KeyError):
+            answer = await self.session.http.get(f"/api/runs/{run_id}")
+            why = short(answer.json()["reason"], 70)
+            log = await self.session.http.get(f"/api/runs/{run_id}/log?stream=stderr")
+            lines = [line for line in log.text.splitlines() if line.strip()]
+            # numbers (a run's, a student's) out, so that like failures are counted together
+            why += f"; stderr: {short(re.sub(r'[0-9]+', 'N', lines[-1]), 90)}" if lines else ""
+        return f" ({why})" if why else ""
+
     async def close(self) -> None:
         with contextlib.suppress(Exception):
             await self.ws.close()
@@ -154,20 +170,39 @@ class Student:
 
 
 async def teacher(url: str, token: str, robot: str, stop: asyncio.Event, record: Record) -> None:
-    """A teacher (staff) presses the robot's emergency stop and resumes it, about once a
-    second; each request timed."""
+    """A teacher (staff) presses the robot's emergency stop, and resumes it 0.4 s after the
+    answer, once a second on a fixed schedule whether or not the last press was answered: a
+    stall is counted in every press it delays, not once (no coordinated omission)."""
     headers = {"Authorization": f"Bearer {token}"}
-    async with httpx.AsyncClient(base_url=url, headers=headers, timeout=PAGE_TIMEOUT) as http:
+    limits = httpx.Limits(max_connections=PRESSES_IN_FLIGHT)
+    async with httpx.AsyncClient(
+        base_url=url, headers=headers, timeout=PAGE_TIMEOUT, limits=limits
+    ) as http:
+        presses: set[asyncio.Task] = set()
         while not stop.is_set():
-            for action, samples in (("estop", record.estops), ("resume", record.resumes)):
-                started, t = time.time(), time.perf_counter()
-                try:
-                    ok = (await http.post(f"/api/robots/{robot}/{action}")).status_code == 200
-                except httpx.HTTPError:
-                    ok = False
-                samples.append((started, (time.perf_counter() - t) * 1000, ok, action))
-                with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(stop.wait(), 0.4)
+            if len(presses) < PRESSES_IN_FLIGHT:
+                task = asyncio.create_task(press_and_resume(http, robot, record))
+                presses.add(task)
+                task.add_done_callback(presses.discard)
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(stop.wait(), 1.0)
+        if presses:
+            await asyncio.wait(presses)
+
+
+PRESSES_IN_FLIGHT = 60  # a minute of presses waiting on a stalled server
+
+
+async def press_and_resume(http: httpx.AsyncClient, robot: str, record: Record) -> None:
+    for action, samples in (("estop", record.estops), ("resume", record.resumes)):
+        started, t = time.time(), time.perf_counter()
+        try:
+            answer = (await http.post(f"/api/robots/{robot}/{action}")).status_code
+        except httpx.HTTPError as exc:
+            answer = type(exc).__name__
+        samples.append((started, (time.perf_counter() - t) * 1000, answer, action))
+        if action == "estop":
+            await asyncio.sleep(0.4)
 
 
 # -- the attacker -------------------------------------------------------------------------------
