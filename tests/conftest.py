@@ -21,6 +21,9 @@ def _test_settings(settings, tmp_path):
     settings.PASSWORD_HASHERS = ["django.contrib.auth.hashers.MD5PasswordHasher"]
     # Any free port: tests run side by side, and never listen beyond loopback.
     settings.GATEWAY_DEFAULTS = {"gcs": "127.0.0.1:0", "programs": "127.0.0.1:0"}
+    # Fair shares (robots.fair_shares) off for tests of other things, which run a user's
+    # programs side by side as they please; tests of the shares set their own limits.
+    settings.RUNS_PER_USER = settings.RUNS_PER_STAFF = 0
 
 
 @pytest.fixture
