@@ -170,10 +170,16 @@ class Run(models.Model):
         _("queue position"), null=True, blank=True, editable=False
     )
     # Its log's storage (runlogs): the bytes it takes on disk, counted against its owner's
-    # quota (while it runs, what it may grow to), whether it is compressed, and when and why
-    # it was pruned (the run itself is kept).
+    # quota (while it runs, what it may grow to), how it is stored once ended, and when and
+    # why it was pruned (the run itself is kept).
     log_bytes = models.BigIntegerField(_("log size (bytes)"), default=0, editable=False)
-    log_gzipped = models.BooleanField(_("log compressed"), default=False, editable=False)
+    log_storage = models.CharField(
+        _("log storage"),
+        max_length=8,
+        blank=True,
+        editable=False,
+        help_text=_("gzip, or plain (as written: it did not compress); empty until settled"),
+    )
     log_pruned_at = models.DateTimeField(_("log pruned"), null=True, blank=True, editable=False)
     log_pruned_reason = models.CharField(
         _("why its log was pruned"), max_length=200, blank=True, editable=False

@@ -143,15 +143,20 @@ def put_compressed(run_id: int, part) -> bool:
             files.remove(path)  # the part too: pruned while it was made
             return False
         size = files.put_in_place(path, part)
-        Run.objects.filter(pk=run_id).update(log_gzipped=True, log_bytes=size)
+        Run.objects.filter(pk=run_id).update(log_storage="gzip", log_bytes=size)
     return True
+
+
+def keep_plain(run_id: int) -> None:
+    """Run ``run_id``'s ended log stays as written (it does not compress): not tried again."""
+    Run.objects.filter(pk=run_id, log_storage="").update(log_storage="plain")
 
 
 def due_for_compression(limit: int = 50) -> list[int]:
     """Ended runs whose logs are not compressed yet and whose time has come (a leftover of an
     agent that stopped before it compressed its own among them)."""
     due = timezone.now() - timedelta(seconds=settings.RUN_LOG_COMPRESS_AFTER)
-    runs = Run.objects.filter(prunable(), log_gzipped=False, ended__lte=due).order_by("ended")
+    runs = Run.objects.filter(prunable(), log_storage="", ended__lte=due).order_by("ended")
     return list(runs.values_list("pk", flat=True)[:limit])
 
 

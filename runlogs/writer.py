@@ -157,9 +157,13 @@ async def store_ended(run_id: int) -> None:
 
 async def compress(run_id: int) -> bool:
     """gzip in its own thread (a big log takes a while), put in place on the database's."""
-    part = await asyncio.get_running_loop().run_in_executor(
-        _GZIP, files.compress_aside, Run.log_path_of(run_id)
-    )
+    try:
+        part = await asyncio.get_running_loop().run_in_executor(
+            _GZIP, files.compress_aside, Run.log_path_of(run_id)
+        )
+    except files.DoesNotCompress:
+        await database_sync_to_async(quota.keep_plain)(run_id)
+        return False
     if part is None:  # no plain log (compressed already, pruned, never written)
         return False
     return await database_sync_to_async(quota.put_compressed)(run_id, part)

@@ -2,7 +2,11 @@
 whose logs are pruned for the total, that two running logs never count on the same free bytes,
 that only logs are ever deleted, and that pruning never races a reader or a compression."""
 
+import base64
+import os
+
 import pytest
+from asgiref.sync import async_to_sync
 from django.contrib.auth.models import User
 from django.test import Client
 from django.utils import timezone
@@ -10,7 +14,7 @@ from django.utils import timezone
 from programs.models import Program, Revision, Run
 from programs.runlog import read_for_page
 from robots.models import Robot
-from runlogs import files, quota
+from runlogs import files, quota, writer
 
 pytestmark = pytest.mark.django_db
 
@@ -125,3 +129,17 @@ def test_the_account_page_says_how_much_of_the_quota_is_used(quotas, robot):
     client.force_login(ann)
     page = client.get("/accounts/")
     assert b"Run logs: 1.5 MB of 3.0 MB" in page.content
+
+
+def test_a_log_that_does_not_compress_is_kept_plain_and_not_tried_again(quotas, robot):
+    quotas.RUN_LOG_COMPRESS_AFTER = 0.0
+    ann = User.objects.create_user("ann")
+    run = a_run(ann, robot, 10)
+    noise = b"".join(b"o " + base64.b64encode(os.urandom(3000)) + b"\n" for _ in range(400))
+    run.log_path.write_bytes(noise)  # what a flood of random bytes leaves
+    assert run.pk in quota.due_for_compression()
+
+    assert async_to_sync(writer.compress)(run.pk) is False
+    run.refresh_from_db()
+    assert run.log_storage == "plain" and run.log_path.read_bytes() == noise
+    assert run.pk not in quota.due_for_compression()

@@ -190,7 +190,7 @@ async def test_ended_logs_are_compressed_in_the_background_and_read_the_same(
         await until(lambda each=each: not each.log_path.exists(), 30, "plain log gone")
 
     await database_sync_to_async(run.refresh_from_db)()
-    assert run.log_gzipped and run.log_bytes == files.gzipped(run.log_path).stat().st_size
+    assert run.log_storage == "gzip" and run.log_bytes == files.gzipped(run.log_path).stat().st_size
     assert run.log_bytes < files.written_length(run.log_path) / 3
     assert shown_log(await get(student, f"/runs/{run.pk}/")) == shown_log(page_before)
     assert await get(student, f"/runs/{run.pk}/log") == download_before
