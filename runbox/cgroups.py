@@ -439,10 +439,21 @@ class RunCgroup:
         if self.v2:
             events = _keyed(mem / "memory.events")
             kills, hit = events.get("oom_kill", 0), events.get("oom", 0)
+            own = hit or events.get("max", 0)
         else:
             control = _keyed(mem / "memory.oom_control")
             kills, hit = control.get("oom_kill", 0), control.get("under_oom", 0)
-        if kills or hit:
+            own = _read_int(mem / "memory.failcnt") or _read_int(mem / "memory.memsw.failcnt")
+        together = self.support.parent
+        if together is not None and not own:  # the run never came to its own limit
+            # All runs together did. Only a kill of this run's counts: v1 marks every run
+            # under_oom while their parent is, and the kernel may have spared this one.
+            if kills:
+                met["memory"] = (
+                    f"the memory limit of all runs together ({together.memory_bytes // MB} MB)"
+                    f" reached: the kernel killed {kills} of this run's processes"
+                )
+        elif kills or hit:
             limit = f" ({self.memory_bytes // MB} MB)" if self.memory_bytes else ""
             met["memory"] = f"memory limit{limit} reached"
             if kills:
