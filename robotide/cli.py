@@ -42,7 +42,7 @@ import threading
 
 import uvicorn
 
-from runbox import oom
+from runbox import delegate, oom
 
 DEFAULT_BIND = "127.0.0.1:8000"
 
@@ -153,6 +153,9 @@ def main(argv: list[str] | None = None) -> int:
     # What the server writes is its own; run accounts get only what is opened to them.
     os.umask(0o077)
     if args.command in ("up", "agent"):
+        # Not root: in a cgroup the user's systemd delegates, if it can, so runs have theirs.
+        if (scoped := delegate.delegated_command()) is not None:
+            os.execve(scoped[0], scoped, {**os.environ, delegate.DELEGATED: "1"})
         open_files_as_allowed()
         # Out of memory, the kernel kills a run's process, never the server or an agent first.
         oom.protect_this_process()
