@@ -15,10 +15,12 @@ phases, one after the other: calm (the class alone), then attack (the class, and
   presses end no student's run) and resumes it, about once a second: e-stop and resume timed.
 - The attacker (a student, on the built-in robot `sim`): (1) a blocks workspace of BLOCKS x
   `controls_if` with 1000 else-ifs each to the blocks-to-Python view, one request after
-  another, and saved as a blocks program and run, one run after another; (2) HOGS runs at once
-  each holding HOG_MB (asked again as they end); (3) log floods (`yes | head -c 200000000`),
-  FLOODS_AT_ONCE at a time, FLOODS in all. An attack the server refuses or queues is counted
-  as handled; how each was answered is printed.
+  another, and saved as a blocks program and run, one run after another; (2) HOGS runs asked
+  at once, each holding HOG_MB for a quarter of the phase, asked again as they end; (3) log
+  floods (`yes | head -c 200000000`), FLOODS_AT_ONCE at a time, FLOODS in all. The hogs end
+  and come back so that a limit on runs at once shares the attacker's turns among all three,
+  as his queue orders them. An attack the server refuses or queues is counted as handled; how
+  each was answered is printed.
 Measured per phase (SECONDS each, after WARM seconds of the class alone): page p50/p99, e-stop
 p50/p99, runs' ask -> end, the server's RSS (sampled every 0.1 s: end and peak) and the runs'
 (sum over the server's child processes, every second), CPU of the server and of this process
@@ -137,6 +139,11 @@ def options_from(argv: list[str] | None) -> Options:
     if args.hog_mb is None:
         options.hog_mb = affordable_hog_mb(options.hogs, options.hog_mb)
     return options
+
+
+def hog_hold(options: Options) -> int:
+    """Seconds a hog holds its memory: a quarter of the phase, so its turns come round."""
+    return int(max(5, options.seconds // 4))
 
 
 def affordable_hog_mb(hogs: int, wanted: int) -> int:
@@ -295,7 +302,7 @@ class Classroom:
             blocks_json=json.dumps(
                 {"blocks": {"languageVersion": 0, "blocks": [BIG_IF] * options.blocks}}
             ),
-            hog_source=HOG_PROGRAM.format(mb=options.hog_mb, hold=int(options.seconds) + 30),
+            hog_source=HOG_PROGRAM.format(mb=options.hog_mb, hold=hog_hold(options)),
             hogs=options.hogs,
             flood_source=FLOOD_PROGRAM,
             floods_at_once=options.floods_at_once,
@@ -484,7 +491,8 @@ def run(argv: list[str] | None = None) -> list[Figure]:
     say(
         f"classroom: {options.students} students on {options.robots} sim robots, a teacher's"
         f" e-stop on {ESTOP_ROBOT!r}, the attacker on {ATTACKER_ROBOT!r}: {options.blocks} big"
-        f" ifs, {options.hogs} x {options.hog_mb} MB, {options.floods} log floods"
+        f" ifs, {options.hogs} x {options.hog_mb} MB held {hog_hold(options)} s,"
+        f" {options.floods} log floods"
         f" ({options.floods_at_once} at once); phases of {options.seconds:g} s on one server"
         f" (calm, then attack); load average at the start {load[0]:.2f} {load[1]:.2f}"
         f" {load[2]:.2f} on {os.cpu_count()} CPUs (other work on the machine skews the figures)"

@@ -70,6 +70,19 @@ async def timed_get(session: Session, path: str, label: str, record: Record) -> 
     record.pages.append((started, (time.perf_counter() - t) * 1000, answer, label))
 
 
+async def why_not_finished(http: httpx.AsyncClient, run_id: int) -> str:
+    """Why a run did not finish, as the API says, and its last line on stderr (asked only
+    then)."""
+    why = ""
+    with contextlib.suppress(httpx.HTTPError, ValueError, KeyError):
+        why = short((await http.get(f"/api/runs/{run_id}")).json()["reason"], 70)
+        log = await http.get(f"/api/runs/{run_id}/log?stream=stderr")
+        lines = [line for line in log.text.splitlines() if line.strip()]
+        # numbers (a run's, a student's) out, so that like failures are counted together
+        why += f"; stderr: {short(re.sub(r'[0-9]+', 'N', lines[-1]), 90)}" if lines else ""
+    return f" ({why})" if why else ""
+
+
 class Student:
     """A workbench open on their program, its console's websocket connected: Run pressed
     (the workbench's save-and-run request), the run followed on the console to its end, then
@@ -131,7 +144,7 @@ class Student:
                 self.last_run = int(answer.headers["X-Run"])
                 state = await self.wait_ended(self.last_run)
                 if state != "finished":
-                    state += await self.reason(self.last_run)
+                    state += await why_not_finished(self.session.http, self.last_run)
         except httpx.HTTPError as exc:
             state = type(exc).__name__
         record.runs.append((asked, (time.perf_counter() - t) * 1000, state, self.robot))
@@ -148,19 +161,6 @@ class Student:
             answer = await self.session.http.get(f"/api/runs/{run_id}")
             return "not ended: " + answer.json()["state"]
         return "not ended"
-
-    async def reason(self, run_id: int) -> str:
-        """Why a run did not finish, as the API says, and its last line on stderr (asked
-        only then)."""
-        why = ""
-        with contextlib.suppress(httpx.HTTPError, ValueError, KeyError):
-            answer = await self.session.http.get(f"/api/runs/{run_id}")
-            why = short(answer.json()["reason"], 70)
-            log = await self.session.http.get(f"/api/runs/{run_id}/log?stream=stderr")
-            lines = [line for line in log.text.splitlines() if line.strip()]
-            # numbers (a run's, a student's) out, so that like failures are counted together
-            why += f"; stderr: {short(re.sub(r'[0-9]+', 'N', lines[-1]), 90)}" if lines else ""
-        return f" ({why})" if why else ""
 
     async def close(self) -> None:
         with contextlib.suppress(Exception):
@@ -243,14 +243,20 @@ class Attacker:
     async def attack(self, stop: asyncio.Event) -> None:
         plan = self.plan
         watcher = asyncio.create_task(self.watch_runs())
-        hog = await self.create("hog", "Hog", "python", plan.hog_source)
+        blocks = await self.create("blocks run", "Big ifs", "blocks", plan.blocks_json)
         flood = await self.create("flood", "Flood", "shell", plan.flood_source)
-        tasks = [self.blocks_view(stop), self.blocks_runs(stop)]
-        if hog:  # each hog asked again when it ends, 3x as many in all
-            tasks += [self.keep_running("hog", hog, stop, 3 * plan.hogs) for _ in range(plan.hogs)]
+        hog = await self.create("hog", "Hog", "python", plan.hog_source)
+        # Asked in this order (blocks, floods, hogs), so that a queue of the attacker's runs
+        # serves each kind in turn; each asked again as it ends.
+        tasks = [self.blocks_view(stop)]
+        if blocks:
+            tasks.append(self.keep_running("blocks run", blocks, stop, 1000, 0.0))
         if flood:
             flooders = range(plan.floods_at_once)
-            tasks += [self.keep_running("flood", flood, stop, plan.floods) for _ in flooders]
+            tasks += [self.keep_running("flood", flood, stop, plan.floods, 0.3) for _ in flooders]
+        if hog:
+            hogs = range(plan.hogs)
+            tasks += [self.keep_running("hog", hog, stop, 10 * plan.hogs, 0.6) for _ in hogs]
         try:
             await asyncio.gather(*tasks)
         finally:
@@ -280,14 +286,11 @@ class Attacker:
             self.answers["blocks view"].append((said, time.perf_counter() - t))
             await asyncio.sleep(0.2)
 
-    async def blocks_runs(self, stop: asyncio.Event) -> None:
-        """(1) saved as a blocks program and run, one run after another."""
-        program = await self.create("blocks run", "Big ifs", "blocks", self.plan.blocks_json)
-        while program and not stop.is_set():
-            await self.launch_and_follow("blocks run", program, stop)
-
-    async def keep_running(self, kind: str, program: int, stop: asyncio.Event, most: int) -> None:
-        """(2), (3): one run of the kind in flight, asked again when it ends, `most` in all."""
+    async def keep_running(
+        self, kind: str, program: int, stop: asyncio.Event, most: int, delay: float
+    ) -> None:
+        """One run of the kind in flight, asked again when it ends, `most` in all."""
+        await asyncio.sleep(delay)
         while not stop.is_set() and self.launched[kind] < most:
             self.launched[kind] += 1
             await self.launch_and_follow(kind, program, stop)
@@ -315,7 +318,10 @@ class Attacker:
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(stop.wait(), 0.5)
         last = self.runs[run["id"]]
-        reason = f" ({short(last['reason'], 90)})" if last.get("reason") else ""
+        if last["state"] in ("failed", "lost"):
+            reason = await why_not_finished(self.api, run["id"])
+        else:
+            reason = f" ({short(last['reason'], 90)})" if last.get("reason") else ""
         still = "" if last["state"] in ENDED else ", still so when the attack ended"
         said = "HTTP 201, " + " -> ".join(self.seen[run["id"]]) + reason + still
         self.answers[kind].append((said, time.perf_counter() - t))
