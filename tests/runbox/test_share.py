@@ -155,6 +155,17 @@ def test_runs_together_stay_within_the_parent_and_lose_a_process_of_theirs(paren
         assert run.remove()
 
 
+def test_a_run_at_its_own_limit_inside_the_parent_is_told_its_own(parent_of):
+    support = parent_of(Share(memory_share=0.25))
+    run = RunCgroup.create("run-own", support, memory_bytes=100 * MB, pids=16)
+    greedy = "chunks = []\nwhile True:\n    chunks.append(bytearray(10 * 1024 * 1024))\n"
+    assert subprocess.run(run.command([sys.executable, "-c", greedy])).returncode == -9
+    assert run.met() == {
+        "memory": "memory limit (100 MB) reached: the kernel killed 1 of its processes"
+    }
+    assert run.remove()
+
+
 def read_lines(procs: list[subprocess.Popen]) -> list[str]:
     """Each process's first line, read at once from all (one waits for memory another holds)."""
     lines = [""] * len(procs)
