@@ -63,7 +63,7 @@ class QuotaRunProcess(RunProcess):
         if self._held:  # behind what waits for a grant, in order
             self._held.append((tag, lines, force))
             return
-        size = sum(len(line) + 3 for line in lines)  # "t " + line + "\n"
+        size = sum(map(len, lines)) + 3 * len(lines)  # "t " + line + "\n" each
         if force or self._written + size <= self._granted:
             super()._append(tag, lines, force)
             if self._granted - self._written < self._ahead:
@@ -133,7 +133,11 @@ class QuotaRunProcess(RunProcess):
         self._finish_when_granted = False
         super()._finished()
         if self._run_id is not None:
-            _in_background(store_ended(self._run_id))
+            _in_background(settle(self._run_id))
+            run_id = self._run_id  # compressed in its time (a timer: nothing waits meanwhile)
+            asyncio.get_running_loop().call_later(
+                settings.RUN_LOG_COMPRESS_AFTER, lambda: _in_background(compress_ended(run_id))
+            )
 
 
 def _in_background(coroutine) -> None:
@@ -142,17 +146,22 @@ def _in_background(coroutine) -> None:
     task.add_done_callback(_background.discard)
 
 
-async def store_ended(run_id: int) -> None:
-    """An ended log: counted as the bytes it takes, then compressed in its time, with any an
-    agent that stopped early left uncompressed."""
+async def settle(run_id: int) -> None:
+    """An ended log counts the bytes it takes, no longer what it was granted."""
     try:
         await database_sync_to_async(quota.settle)(run_id)
-        await asyncio.sleep(settings.RUN_LOG_COMPRESS_AFTER)
+    except Exception:  # the run has ended: the server's log says what went wrong
+        log.exception("run %s: its log's size could not be counted", run_id)
+
+
+async def compress_ended(run_id: int) -> None:
+    """Its log compressed, and any an agent that stopped early left uncompressed."""
+    try:
         await compress(run_id)
         for leftover in await database_sync_to_async(quota.due_for_compression)():
             await compress(leftover)
-    except Exception:  # the run has ended: the server's log says what went wrong
-        log.exception("run %s: its log could not be stored", run_id)
+    except Exception:
+        log.exception("run %s: its log could not be compressed", run_id)
 
 
 async def compress(run_id: int) -> bool:
