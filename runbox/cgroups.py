@@ -26,9 +26,10 @@ total of CPU seconds: the watcher polls `met()` and stops the run when "cpu_seco
 On v1 the OOM killer kills one process, not the run: stop the run when "memory" is in `met()`
 (v2 kills the whole run itself, memory.oom.group).
 
-Runs' cgroups go below the agent's own cgroup, in <own>/robotide-runs/<name>. On v2 a cgroup that
-hands controllers to its children may hold no processes, so the agent's own processes move to
-<own>/robotide-agent first.
+Runs' cgroups go below the agent's own cgroup, in <own>/robotide-runs/<name>; an agent makes
+them in its robotide's parent instead, <own>/robotide-runs-<instance>/<name>, whose limits hold
+for all runs together (runbox.share). On v2 a cgroup that hands controllers to its children may
+hold no processes, so the agent's own processes move to <own>/robotide-agent first.
 """
 
 import functools
