@@ -336,14 +336,22 @@ def pane_poster(appliance, student, source: str = IF_BOMB):
 
 
 def ask_healthz_and_estop(appliance) -> tuple[tuple[int, float], tuple[int, float]]:
-    """(status, seconds) of /healthz, and of a teacher's e-stop of the sim robot (resumed)."""
-    asked = time.perf_counter()
-    health = httpx.get(f"{appliance.url}/healthz", timeout=60).status_code
-    health_took, asked = time.perf_counter() - asked, time.perf_counter()
-    estop = appliance.api("POST", "/api/robots/sim/estop").status_code
-    estop_took = time.perf_counter() - asked
-    appliance.resume("sim")
-    return (health, health_took), (estop, estop_took)
+    """(status, seconds) of /healthz, and of a teacher's e-stop of the sim robot (resumed);
+    status 0 for no answer in a minute."""
+    return asked(appliance, "GET", "/healthz"), asked(appliance, "POST", "/api/robots/sim/estop")
+
+
+def asked(appliance, method: str, path: str) -> tuple[int, float]:
+    headers = {"Authorization": f"Bearer {appliance.token}"}
+    started = time.perf_counter()
+    try:
+        status = httpx.request(method, appliance.url + path, headers=headers, timeout=60)
+        return status.status_code, time.perf_counter() - started
+    except httpx.TimeoutException:
+        return 0, time.perf_counter() - started
+    finally:
+        if path.endswith("/estop"):  # for the next press, and the tests after this one
+            httpx.post(f"{appliance.url}/api/robots/sim/resume", headers=headers, timeout=120)
 
 
 def figures(answers: list[tuple[int, float]]) -> str:
@@ -413,7 +421,6 @@ def test_healthz_and_the_estop_answer_while_a_student_floods_the_server(applianc
         flooding.clear()
         for thread in threads:
             thread.join(timeout=180)
-        appliance.resume("sim")
     grown = server_rss(appliance) - baseline
     print(
         f"calm: healthz {figures([h for h, _ in calm])}, e-stop {figures([e for _, e in calm])}"
@@ -421,8 +428,10 @@ def test_healthz_and_the_estop_answer_while_a_student_floods_the_server(applianc
         f"e-stop {figures(estops)}; the server grew {grown / MB:.1f} MB"
     )
     assert not failures, failures[:5]
-    assert len(healthz) >= 20 and all(status == 200 for status, _ in healthz), healthz
-    assert len(estops) >= 10 and all(status == 200 for status, _ in estops), estops
+    # On main: 11 of each in the 150 s the flood was given (an e-stop took up to 28.6 s), no
+    # post refused, and the server grew 8.6 GB.
+    assert len(healthz) >= 20 and all(status == 200 for status, _ in healthz), figures(healthz)
+    assert len(estops) >= 10 and all(status == 200 for status, _ in estops), figures(estops)
     assert len(refusals) >= 40 and len(runs) >= 3
     assert set(runs) == {"failed"}, runs
     assert grown < 50 * MB, f"the server grew {grown / MB:.0f} MB"
