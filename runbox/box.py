@@ -317,11 +317,10 @@ class BwrapBox(Box):
             args += ["--seccomp", str(self.seccomp_fd)]
         if self.resolv_r is not None:
             args += self.in_force.resolv_conf_args(self.resolv_r)
-        box = [
+        return [
             *self.in_force.bwrap(self.socket_dir), *args,
             *self.in_force.folder_args(self.disk_mb), "--", "/bin/sh", "-c", ". /dev/stdin",
         ]  # fmt: skip
-        return oom.first_to_go(box, tool("choom"))
 
     def pass_fds(self) -> tuple[int, ...]:
         fds = (self.info_w, self.block_r, self.seccomp_fd, self.resolv_r)
@@ -339,6 +338,7 @@ class BwrapBox(Box):
         info = await self._read_info()
         self._adopt_init(info["child-pid"])
         self.pidns = info["pid-namespace"]
+        oom.first_to_go_now(self.init_pid)  # before it forks the run's shell: all inherit it
         for limit, values in self.rlimits.items():
             resource.prlimit(self.init_pid, limit, values)
         await self._enter_cgroup(wait_for_cgroup)

@@ -4,7 +4,8 @@ oom_score_adj goes from -1000 (never) to 1000 (first); a child starts with its p
 server and the agents lower their own where they may (root: CAP_SYS_RESOURCE), not to -1000:
 a server that leaks must still be stoppable by the kernel rather than take the machine down.
 An ordinary user may only raise a value: there the server keeps 0 and the runs go first all
-the same, every box being started at 1000 (util-linux choom), its program and forks with it.
+the same, every box being at 1000, its program and forks with it (a rootless box is started
+by util-linux choom; a root one is set by the agent before its program starts).
 """
 
 import os
@@ -33,3 +34,9 @@ def score_adj(pid: int | str = "self") -> int:
 def first_to_go(argv: list[str], choom: str) -> list[str]:
     """`argv`, started with the runs' oom_score_adj (`choom`: its path)."""
     return [choom, "-n", str(RUN), "--", *argv]
+
+
+def first_to_go_now(pid: int) -> None:
+    """Process `pid` (of a box not yet running anything of its program's) at the runs'
+    oom_score_adj: as root, with no exec of choom on a run's way."""
+    Path(f"/proc/{pid}/oom_score_adj").write_text(f"{RUN}\n")
