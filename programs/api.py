@@ -23,6 +23,8 @@ from programs.forms import already_named
 from programs.languages import LANGUAGES, get_language
 from programs.models import MAX_SOURCE_BYTES, Program, Run
 from programs.runlog import download
+from robotide import names
+from robotide.names import Name
 from robotide.schemas import Body
 from robots import run_queue, stops
 from robots.models import get_robot_for_user
@@ -74,7 +76,7 @@ class ProgramIn(Body):
         value = value.strip()
         if not value:
             raise ValueError(_("name must not be blank"))
-        return value
+        return names.check(value)  # as the pages' forms: after the spaces around it go
 
 
 class ProgramUpdate(ProgramIn):
@@ -104,7 +106,7 @@ class ProgramOut(Schema):
 
 
 class RunIn(Body):
-    robot: str = Field(min_length=1)
+    robot: Name = Field(min_length=1)
     args: list[str] = []
 
 
@@ -152,7 +154,7 @@ class QueueMoveIn(Body):
 
 
 class QueueResumeIn(Body):
-    robot: str = Field(min_length=1)
+    robot: Name = Field(min_length=1)
 
 
 class QueueResumedOut(Schema):
@@ -353,7 +355,7 @@ def push_program(request, program_id: int, data: PushIn):
 
 
 @runs_router.get("", response=list[RunOut])
-def list_runs(request, state: RunState | None = None, robot: str | None = None, limit: int = 100):
+def list_runs(request, state: RunState | None = None, robot: Name | None = None, limit: int = 100):
     """Runs you may see; to staff and a robot's owner, also every run queued on it."""
     runs = run_queue.runs_to_see(request.user)
     if state is not None:

@@ -42,6 +42,7 @@ from django.utils.translation import gettext as _
 from programs.forms import MAX_NAME, free_name
 from programs.languages import LANGUAGES, language_for_filename
 from programs.models import MAX_SOURCE_BYTES, Program
+from robotide import names
 
 FORMAT = "robotide-programs"
 VERSION = 1
@@ -369,7 +370,9 @@ def _read_program(zf: zipfile.ZipFile, name: str, info: zipfile.ZipInfo, entry: 
 
 def _program_name(name: str, entry: dict) -> str:
     wanted = entry.get("name") if isinstance(entry.get("name"), str) else ""
-    return wanted.strip()[:MAX_NAME] or PurePosixPath(name).stem.strip()[:MAX_NAME] or "imported"
+    wanted = names.cleaned(wanted)  # a zip's names were never checked as names
+    stem = names.cleaned(PurePosixPath(name).stem)
+    return wanted.strip()[:MAX_NAME] or stem.strip()[:MAX_NAME] or "imported"
 
 
 def export_filename(user) -> str:

@@ -4,12 +4,13 @@ from django.utils.translation import gettext_lazy as _
 
 from programs.languages import language_for_filename, language_options
 from programs.models import MAX_SOURCE_BYTES, Program
+from robotide import names
 
 MAX_NAME = Program._meta.get_field("name").max_length
 
 
 class NewProgramForm(forms.Form):
-    name = forms.CharField(label=_("Name"), max_length=100)
+    name = forms.CharField(label=_("Name"), max_length=100, validators=[names.validate])
     language = forms.ChoiceField(label=_("Language"), choices=language_options)
 
     def __init__(self, *args, owner=None, **kwargs):
@@ -23,7 +24,9 @@ class NewProgramForm(forms.Form):
 class EditProgramForm(forms.Form):
     source = forms.CharField(label=_("Source"), required=False, widget=forms.Textarea, strip=False)
     language = forms.ChoiceField(label=_("Language"), choices=language_options)
-    save_as = forms.CharField(max_length=100, required=False, label=_("Save as"))
+    save_as = forms.CharField(
+        max_length=100, required=False, label=_("Save as"), validators=[names.validate]
+    )
 
     def clean_source(self):
         # Browsers send CRLF from textareas; programs keep Unix line ends.
@@ -85,8 +88,12 @@ def too_large() -> str:
 
 
 def free_name(owner, name: str) -> str:
-    """`name`, or `name (2)`, `name (3)`... whichever the owner does not have yet."""
-    name = name[: MAX_NAME - 8]  # room for " (9999)" within the name's length
+    """`name`, or `name (2)`, `name (3)`... whichever the owner does not have yet. Made from
+    what may not have been typed as a name (a file's, a zip member's, an old program's):
+    without the characters a name may not hold."""
+    name = (
+        names.cleaned(name).strip()[: MAX_NAME - 8] or "program"
+    )  # room for " (9999)" within the name's length
     taken = set(
         Program.objects.filter(owner=owner, name__startswith=name).values_list("name", flat=True)
     )

@@ -11,6 +11,7 @@ from django.utils.translation import gettext as _
 
 from programs.forms import free_name
 from programs.models import Program, Share
+from robotide import names
 
 
 class ShareError(ValueError):
@@ -26,6 +27,8 @@ def add_share(
     targets = [bool(user), bool(group), bool(everyone)]
     if sum(targets) != 1:
         raise ShareError(_("share with one of: a user, a group, or everyone"))
+    if why := names.problem(user) or names.problem(group):
+        raise ShareError(why)
     target = {"everyone": True}
     if user:
         found = get_user_model().objects.filter(username=user).first()

@@ -14,6 +14,7 @@ from pydantic import StrictBool
 from programs.access import OWN, get_program_for_user
 from programs.api import Error, ProgramOut, _program_out
 from programs.shares import ShareError, add_share, copy_program
+from robotide.names import Name
 from robotide.schemas import Body
 
 shares_router = Router(tags=["sharing"])
@@ -21,8 +22,8 @@ groups_router = Router(tags=["groups"])
 
 
 class ShareIn(Body):
-    user: str = ""
-    group: str = ""
+    user: Name = ""
+    group: Name = ""
     everyone: StrictBool = False
     can_edit: StrictBool = False
 
@@ -45,7 +46,7 @@ class ShareOut(Schema):
 
 
 class CopyIn(Body):
-    name: str = Field("", max_length=100)
+    name: Name = Field("", max_length=100)
 
 
 @shares_router.get("/{int:program_id}/shares", response=list[ShareOut])
@@ -83,7 +84,7 @@ def copy(request, program_id: int, data: CopyIn):
 
 
 class GroupIn(Body):
-    name: str = Field(pattern=r"^[\w.@+-]{1,150}$")
+    name: Name = Field(pattern=r"^[\w.@+-]{1,150}$")
 
 
 class GroupOut(Schema):
@@ -101,7 +102,7 @@ class GroupOut(Schema):
 
 
 class MemberIn(Body):
-    user: str
+    user: Name
     teacher: StrictBool = False
 
 
@@ -129,7 +130,7 @@ def create_group(request, data: GroupIn):
 
 
 @groups_router.post("/{name}/members", response=GroupOut)
-def add_member(request, name: str, data: MemberIn):
+def add_member(request, name: Name, data: MemberIn):
     """Add a student, or with ``"teacher": true`` a teacher, to the class."""
     from robotide.models import ClassTeacher
 

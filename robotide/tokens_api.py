@@ -9,13 +9,14 @@ from ninja.responses import Status
 from ninja.security import django_auth
 
 from robotide.models import ApiToken
+from robotide.names import Name
 from robotide.schemas import Body
 
 tokens_router = Router(tags=["tokens"])
 
 
 class TokenIn(Body):
-    name: str = Field("", max_length=100)
+    name: Name = Field("", max_length=100)
 
 
 class TokenOut(Schema):

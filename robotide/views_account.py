@@ -10,6 +10,7 @@ from django.utils.translation import gettext_lazy
 from django.views.decorators.cache import never_cache
 from django.views.decorators.http import require_POST
 
+from robotide import names
 from robotide.models import ApiToken
 from runlogs.quota import usage_of
 
@@ -22,6 +23,7 @@ class TokenForm(forms.Form):
         max_length=100,
         required=False,
         help_text=gettext_lazy("What it is for, e.g. “laptop” or “CI”"),
+        validators=[names.validate],
     )
 
 

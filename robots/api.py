@@ -9,6 +9,7 @@ from pydantic import field_validator, model_validator
 
 import rhal
 from programs.api import Error
+from robotide.names import Name
 from robotide.schemas import Body
 from robots import disclosure, fair_shares, stops
 from robots.bus import announce_robot_sync, ask_agent_sync, reconfigure_sync
@@ -22,7 +23,7 @@ DRIVER_URL = {"pattern": f"^({'|'.join(re.escape(scheme) for scheme in sorted(rh
 
 
 class RobotIn(Body):
-    name: str = Field(pattern=r"^[a-zA-Z0-9_-]{1,50}$")
+    name: Name = Field(pattern=r"^[a-zA-Z0-9_-]{1,50}$")
     url: str = Field(min_length=1, max_length=500, json_schema_extra=DRIVER_URL)
     settings: dict = {}
     description: str = ""
@@ -114,12 +115,12 @@ def create_robot(request, data: RobotIn):
 
 
 @robots_router.get("/{name}", response=RobotOut)
-def get_robot(request, name: str):
+def get_robot(request, name: Name):
     return get_robot_for_user(request.user, name)
 
 
 @robots_router.patch("/{name}", response=RobotOut)
-def update_robot(request, name: str, data: RobotPatch):
+def update_robot(request, name: Name, data: RobotPatch):
     """Change a robot's URL, settings or description; its agent reopens the robot with them."""
     if not request.user.is_staff:
         raise HttpError(403, _("Only staff may change robots."))
@@ -139,13 +140,13 @@ def update_robot(request, name: str, data: RobotPatch):
 
 
 @robots_router.get("/{name}/sensors", response={200: dict, 503: Error})
-def robot_sensors(request, name: str):
+def robot_sensors(request, name: Name):
     robot = get_robot_for_user(request.user, name)
     return ask_agent_sync(robot.name, "robot.sensors")["sensors"]
 
 
 @robots_router.post("/{name}/estop", response={200: dict, 503: Error})
-def robot_estop(request, name: str):
+def robot_estop(request, name: Name):
     """The emergency stop: the robot's own stop, every run on it killed at once, and nothing
     moves it until it is resumed. Recorded (who, when, the runs it ended)."""
     robot = get_robot_for_user(request.user, name)
@@ -154,7 +155,7 @@ def robot_estop(request, name: str):
 
 
 @robots_router.post("/{name}/resume", response={200: dict})
-def robot_resume(request, name: str):
+def robot_resume(request, name: Name):
     """After an emergency stop: staff, the robot's owner or whoever pressed it (alone)."""
     robot = get_robot_for_user(request.user, name)
     return {"robot": robot.name, "waiting": stops.resume(request.user, robot, "the API")}

@@ -13,6 +13,7 @@ from pydantic import field_validator
 from gateway import specs
 from gateway.router import split_address
 from programs.api import Error
+from robotide.names import Name
 from robotide.schemas import Body
 from robots.bus import AgentUnavailable, ask_agent_sync
 from robots.models import Robot, SerialBridge, get_robot_for_user
@@ -96,7 +97,7 @@ def bridge_out(row: SerialBridge, live: dict | None) -> dict:
 
 
 @bridges_router.get("/{name}/bridges", response=list[BridgeOut])
-def list_bridges(request, name: str):
+def list_bridges(request, name: Name):
     return bridge_rows(_robot(request, name))
 
 
@@ -107,7 +108,7 @@ def bridge_rows(robot: Robot) -> list[dict]:
 
 
 @bridges_router.post("/{name}/bridges", response={201: BridgeOut, 409: Error})
-def add_bridge(request, name: str, data: BridgeIn):
+def add_bridge(request, name: Name, data: BridgeIn):
     """Share a serial device over TCP; it listens at once (or says why it cannot)."""
     robot = _robot(request, name, change=True)
     row = SerialBridge.objects.create(robot=robot, **data.dict())
@@ -115,7 +116,7 @@ def add_bridge(request, name: str, data: BridgeIn):
 
 
 @bridges_router.delete("/{name}/bridges/{int:bridge_id}", response={204: None})
-def delete_bridge(request, name: str, bridge_id: int):
+def delete_bridge(request, name: Name, bridge_id: int):
     robot = _robot(request, name, change=True)
     deleted, _rows = robot.bridges.filter(pk=bridge_id).delete()
     if not deleted:

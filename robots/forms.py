@@ -5,6 +5,7 @@ from django import forms
 from django.utils.translation import gettext_lazy as _
 
 from programs.access import programs_for_user
+from robotide import names
 from robots.driver_settings import add_option_fields, check_settings, known_driver, settings_from
 from robots.models import RUN_SETTINGS, Robot, RobotButton
 
@@ -99,6 +100,7 @@ class ButtonForm(forms.ModelForm):
 
     def clean_label(self):
         label = self.cleaned_data["label"].strip()
+        names.validate(label)
         taken = RobotButton.objects.filter(robot=self.instance.robot, label=label)
         if taken.exclude(pk=self.instance.pk).exists():
             raise forms.ValidationError(_("This robot has a button with that label already."))

@@ -20,6 +20,7 @@ from pydantic import StrictBool, model_validator
 
 from gateway import specs
 from programs.api import Error
+from robotide.names import Name
 from robotide.schemas import Body
 from robots.bus import AgentUnavailable, ask_agent_sync
 from robots.gateway import recordings_dir
@@ -135,14 +136,14 @@ def endpoint_rows(robot: Robot, live: dict | None = None) -> list[dict]:
 
 
 @gateway_router.get("/{name}/endpoints", response={200: list[EndpointOut], 409: Error})
-def list_endpoints(request, name: str):
+def list_endpoints(request, name: Name):
     """Every endpoint of the robot's router, with its live stats."""
     robot = _mavlink_robot(request, name)
     return endpoint_rows(robot)
 
 
 @gateway_router.post("/{name}/endpoints", response={201: EndpointOut, 409: Error})
-def add_endpoint(request, name: str, data: EndpointIn):
+def add_endpoint(request, name: Name, data: EndpointIn):
     """Add an endpoint; it starts at once. One that cannot (its address in use, no such host)
     is kept with its error, and the others route on."""
     robot = _mavlink_robot(request, name, change=True)
@@ -158,7 +159,7 @@ def add_endpoint_row(robot: Robot, spec: dict) -> dict:
 
 
 @gateway_router.put("/{name}/endpoints/{int:endpoint_id}", response={200: EndpointOut, 409: Error})
-def change_endpoint(request, name: str, endpoint_id: int, data: EndpointIn):
+def change_endpoint(request, name: Name, endpoint_id: int, data: EndpointIn):
     """Replace an endpoint's description; the router restarts it so."""
     robot = _mavlink_robot(request, name, change=True)
     endpoint = _row(robot, endpoint_id)
@@ -170,7 +171,7 @@ def change_endpoint(request, name: str, endpoint_id: int, data: EndpointIn):
 
 
 @gateway_router.delete("/{name}/endpoints/{int:endpoint_id}", response={204: None, 409: Error})
-def delete_endpoint(request, name: str, endpoint_id: int):
+def delete_endpoint(request, name: Name, endpoint_id: int):
     robot = _mavlink_robot(request, name, change=True)
     delete_endpoint_row(robot, endpoint_id)
     return Status(204, None)
@@ -224,7 +225,7 @@ def _recordings(robot: Robot, current: dict | None) -> dict:
 
 
 @gateway_router.get("/{name}/recordings", response={200: Recordings, 409: Error})
-def list_recordings(request, name: str):
+def list_recordings(request, name: Name):
     """The robot's .tlog recordings (kept where its agent runs), and the one under way."""
     robot = _mavlink_robot(request, name)
     try:
@@ -235,7 +236,7 @@ def list_recordings(request, name: str):
 
 
 @gateway_router.post("/{name}/recordings", response={200: Recordings, 409: Error, 503: Error})
-def record(request, name: str, data: RecordIn):
+def record(request, name: Name, data: RecordIn):
     """Start or stop recording every frame the robot's router routes."""
     robot = _mavlink_robot(request, name, change=True)
     reply = ask_agent_sync(robot.name, "gateway.record", timeout=STATS_TIMEOUT, on=data.on)
@@ -250,7 +251,7 @@ def record(request, name: str, data: RecordIn):
         "content": {"application/octet-stream": {"schema": {"type": "string", "format": "binary"}}},
     }}},
 )  # fmt: skip
-def download_recording(request, name: str, file: str):
+def download_recording(request, name: Name, file: Name):
     robot = _mavlink_robot(request, name)
     path = recordings_dir(robot.name) / file
     if not TLOG_NAME.match(file) or not path.is_file():
