@@ -119,12 +119,14 @@ def admit(run_id: int, box_cap: int | None = None) -> Decision:
     untaken) or from its robot's queue (``queued``). ``box_cap``: what the deciding agent's
     isolation allows at once."""
     with transaction.atomic():
-        ids = Run.objects.filter(pk=run_id).values_list("owner_id", "robot_id").first()
-        if ids is None:
-            return Decision(Admission.GONE)
-        owner = get_user_model().objects.select_for_update().get(pk=ids[0])
-        robot = Robot.objects.select_for_update().get(pk=ids[1])
+        # The owner's row, then the robot's, always in this order (no deadlock between two
+        # admissions): each locked alone, not the run's row with it.
+        users = get_user_model().objects.select_for_update(of=("self",))
+        owner = users.filter(runs__pk=run_id).first()
+        robot = Robot.objects.select_for_update(of=("self",)).filter(runs__pk=run_id).first()
         run = Run.objects.filter(pk=run_id).first()  # as it is now, under the locks
+        if owner is None or robot is None or run is None:
+            return Decision(Admission.GONE)
         queued = run.state == Run.State.QUEUED
         if not queued and not (run.state == Run.State.STARTING and run.pid is None):
             return Decision(Admission.GONE)
@@ -144,12 +146,17 @@ def admit(run_id: int, box_cap: int | None = None) -> Decision:
 
 def _over_limit(run: Run, per_user: int | None, per_robot: int | None) -> str | None:
     """Why ``run`` may not start now, or None."""
-    others = Run.objects.filter(going()).exclude(pk=run.pk)
-    if per_user is not None:
-        count = others.filter(owner_id=run.owner_id).count()
-        if count >= per_user:
-            return user_reason(count, per_user)
-    if per_robot is not None and others.filter(robot_id=run.robot_id).count() >= per_robot:
+    if per_user is None and per_robot is None:
+        return None
+    mine, robots = models.Q(owner_id=run.owner_id), models.Q(robot_id=run.robot_id)
+    counts = (
+        Run.objects.filter(going() & (mine | robots))
+        .exclude(pk=run.pk)
+        .aggregate(user=models.Count("pk", filter=mine), robot=models.Count("pk", filter=robots))
+    )
+    if per_user is not None and counts["user"] >= per_user:
+        return user_reason(counts["user"], per_user)
+    if per_robot is not None and counts["robot"] >= per_robot:
         return robot_reason(per_robot)
     return None
 
