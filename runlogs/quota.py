@@ -26,6 +26,7 @@ from runlogs.notes import megabytes
 MB = 1024 * 1024
 TOTAL_AT_MOST = 4096 * MB
 STEP_MIN, STEP_MAX = 64 * 1024, 4 * MB  # a running log is granted this much more at a time
+PRUNED_AT_ONCE = 1000  # the oldest logs looked at for one grant (the next goes on)
 
 
 @dataclass(frozen=True)
@@ -35,7 +36,8 @@ class Grant:
 
 
 def per_user() -> int:
-    return settings.RUN_LOG_QUOTA_PER_USER
+    """The setting; 0: none of its own, the total alone."""
+    return settings.RUN_LOG_QUOTA_PER_USER or total()
 
 
 def total() -> int:
@@ -109,7 +111,7 @@ def _make_room(quota: int, counted_q: Q, prunable_q: Q, want: int, reason: str) 
     used = Run.objects.filter(counted_q).aggregate(used=Sum("log_bytes"))["used"] or 0
     if used + want > quota:
         oldest = Run.objects.filter(prunable_q).order_by("ended", "pk")
-        for run_id, size in oldest.values_list("pk", "log_bytes").iterator():
+        for run_id, size in oldest.values_list("pk", "log_bytes")[:PRUNED_AT_ONCE]:
             if used + want <= quota:
                 break
             if prune(run_id, reason):

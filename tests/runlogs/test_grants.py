@@ -131,6 +131,7 @@ def test_the_account_page_says_how_much_of_the_quota_is_used(quotas, robot):
     assert b"Run logs: 1.5 MB of 3.0 MB" in page.content
 
 
+@pytest.mark.django_db(transaction=True)  # compress() asks the database as the agent does
 def test_a_log_that_does_not_compress_is_kept_plain_and_not_tried_again(quotas, robot):
     quotas.RUN_LOG_COMPRESS_AFTER = 0.0
     ann = User.objects.create_user("ann")
