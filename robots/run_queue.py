@@ -190,8 +190,9 @@ class RunQueue:
         self._wake.set()
 
     def hold(self) -> None:
-        """An emergency stop: runs waiting now stay queued until someone resumes."""
-        if self.waiting:
+        """An emergency stop: runs waiting now (for the robot or a share) stay queued until
+        someone resumes."""
+        if self.waiting or self.sharing:
             self.held = True
             task = asyncio.create_task(self._mark_held())
             self._marking.add(task)

@@ -17,9 +17,10 @@ from django.contrib.auth.models import User
 
 from programs.models import Run
 from robots import fair_shares, run_queue
+from robots.bus import ask_agent
 from robots.models import Robot
 from tests.e2e.agents import run_program, until
-from tests.e2e.test_run_queue import api, in_state
+from tests.e2e.test_run_queue import api, fresh, in_state
 
 pytestmark = pytest.mark.django_db(transaction=True)
 
@@ -177,3 +178,29 @@ async def test_an_end_on_one_robot_starts_the_owners_run_waiting_on_another(
     await let_end(agent, first)
     await in_state(waits, "running")
     await let_end(other_agent, waits)
+
+
+async def test_an_emergency_stop_holds_runs_waiting_for_a_share_too(robot_on, limits):
+    limits.RUNS_PER_USER = 1
+    peer, agent, robot, alice = await robot_on("sim")
+    first = await run_program(alice, robot, HOLDS)
+    await in_state(first, "running")
+    waits = await run_program(alice, robot, HOLDS)
+    await in_state(waits, "queued")
+    assert (await ask_agent("sim", "robot.estop"))["stopped"] == 1
+    await in_state(first, "stopped")
+    await until_reason(waits, Run.HELD)  # its share is free, yet it waits: held
+    assert (await fresh(waits)).state == "queued"
+    assert (await ask_agent("sim", "robot.resume"))["resumed"] is True
+    await in_state(waits, "running")
+    await let_end(agent, waits)
+
+
+async def until_reason(run: Run, reason: str) -> None:
+    async def said():
+        return (await fresh(run)).reason == reason
+
+    deadline = asyncio.get_running_loop().time() + 20
+    while not await said():
+        assert asyncio.get_running_loop().time() < deadline, f"run {run.pk}: {run.reason!r}"
+        await asyncio.sleep(0.05)
