@@ -1,4 +1,4 @@
-"""The quota's bookkeeping, on the database and files alone: what a running log is granted,
+"""Log storage on the database and files alone: what a running log is granted,
 whose logs are pruned for the total, that two running logs never count on the same free bytes,
 that only logs are ever deleted, and that pruning never races a reader or a compression."""
 
@@ -7,10 +7,12 @@ import os
 
 import pytest
 from asgiref.sync import async_to_sync
+from channels.testing import WebsocketCommunicator
 from django.contrib.auth.models import User
 from django.test import Client
 from django.utils import timezone
 
+from programs.consumers import RunConsumer
 from programs.models import Program, Revision, Run
 from programs.runlog import read_for_page
 from robots.models import Robot
@@ -144,3 +146,30 @@ def test_a_log_that_does_not_compress_is_kept_plain_and_not_tried_again(quotas, 
     run.refresh_from_db()
     assert run.log_storage == "plain" and run.log_path.read_bytes() == noise
     assert run.pk not in quota.due_for_compression()
+
+
+@pytest.mark.django_db(transaction=True)
+def test_the_run_websocket_sends_a_compressed_log_as_it_did_plain(quotas, robot):
+    """Its tail and its catch-up from the offset a page was made with."""
+    ann = User.objects.create_user("ann")
+    run = a_run(ann, robot, 0)
+    run.log_path.write_bytes(b"".join(b"o line %d\n" % n for n in range(30000)))
+    offset = run.log_path.stat().st_size - len(b"o line 29999\n")
+
+    def sent(path):
+        async def connect():
+            comm = WebsocketCommunicator(RunConsumer.as_asgi(), path)
+            comm.scope["user"], comm.scope["url_route"] = ann, {"kwargs": {"run_id": run.pk}}
+            assert (await comm.connect())[0]
+            first = await comm.receive_from()
+            await comm.disconnect()
+            return first
+
+        return async_to_sync(connect)()
+
+    plain = sent(f"/ws/runs/{run.pk}/"), sent(f"/ws/runs/{run.pk}/?from={offset}")
+    assert "28000 line(s) not shown live" in plain[0] and "line 29999" in plain[1]
+    assert "line 29998" not in plain[1]
+    async_to_sync(writer.compress)(run.pk)
+    assert not run.log_path.exists()
+    assert (sent(f"/ws/runs/{run.pk}/"), sent(f"/ws/runs/{run.pk}/?from={offset}")) == plain
