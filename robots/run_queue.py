@@ -111,7 +111,7 @@ class RunQueue:
         if not self._busy_for(message.get("user", "")) and not self.waiting and not self.held:
             # Only this agent queues runs, so once counted its count is an upper bound (the
             # web tier may cancel, never add): only before the first count is the database
-            # asked. A start then costs no database round trip.
+            # asked. A start then costs one round trip: its share's (fair_shares.admit).
             if not self._counted:
                 await self._count()
             if not self.waiting:
