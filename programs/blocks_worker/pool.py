@@ -78,7 +78,7 @@ class Worker:
             try:
                 self.process.stdin.write(json.dumps(request).encode() + b"\n")
             except BrokenPipeError:  # it had ended before (found dead between two polls)
-                self.ended_before_asked = True
+                self.ended_before_asked = not self.killed  # not the watchdog's doing
                 return None
             line = self._answer_line()
         except OSError:
