@@ -136,11 +136,11 @@ async def test_a_log_that_would_outgrow_what_is_left_ends_its_run(robot_on, sett
     last = files.open_log(run.log_path).file.read().splitlines()[-3:]
     assert any(b"further output was discarded" in line for line in last), last
 
-    # Nothing ended to prune: the next one is refused at once, and says so too.
+    # The next one has the first, ended, pruned to make room, and ends at the quota too.
     second = await ended_run(student, robot, FLOOD)
     assert "run log quota reached" in second.reason
     await database_sync_to_async(run.refresh_from_db)()
-    assert run.log_pruned_at is not None  # the first, ended, made room for the second
+    assert run.log_pruned_at is not None
 
 
 NUMBERED_FLOOD = """
