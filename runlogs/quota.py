@@ -106,8 +106,9 @@ def grant(run_id: int, written: int, need: int, cap: int) -> Grant:
 
 
 def _make_room(quota: int, counted_q: Q, prunable_q: Q, want: int, reason: str) -> int:
-    """Room for ``want`` more bytes beside what ``counted_q`` takes, the oldest logs of
-    ``prunable_q`` pruned until it fits (or none is left): how much room there is now."""
+    """Room for a log of ``want`` bytes beside what ``counted_q`` takes within ``quota``, the
+    oldest logs of ``prunable_q`` pruned until it fits (or none is left): the bytes that log
+    may have now."""
     used = Run.objects.filter(counted_q).aggregate(used=Sum("log_bytes"))["used"] or 0
     if used + want > quota:
         oldest = Run.objects.filter(prunable_q).order_by("ended", "pk")
