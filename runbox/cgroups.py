@@ -311,17 +311,31 @@ class RunCgroup:
             cg.remove()  # a run's name is never reused: this one is a leftover
         try:
             if support.parent is not None:
-                support.parent.ensure(support)  # never a parent without its limits
-            elif cg.v2:
-                prepare_v2(support.bases["memory"], support.controllers)
-            for folder in cg.folders():
-                folder.parent.mkdir(exist_ok=True)
-                folder.mkdir()
+                cg._make_in_parent()
+            else:
+                if cg.v2:
+                    prepare_v2(support.bases["memory"], support.controllers)
+                for folder in cg.folders():
+                    folder.parent.mkdir(exist_ok=True)
+                    folder.mkdir()
             cg._limit()
         except (OSError, CgroupError) as e:
             cg.remove()
             raise CgroupError(f"cannot make the run's cgroup {name}: {e}") from e
         return cg
+
+    def _make_in_parent(self) -> None:
+        """Its folders in the parent all runs share, never in a parent without its limits:
+        made again should the last agent of the robotide have removed it meanwhile."""
+        for attempt in range(2):
+            self.support.parent.ensure(self.support)
+            try:
+                for folder in self.folders():
+                    folder.mkdir(exist_ok=True)  # a leftover of its name went before
+                return
+            except FileNotFoundError:
+                if attempt:
+                    raise
 
     def _limit(self) -> None:
         d, mem, percent = self.dirs, self.memory_bytes, self.cpu_percent

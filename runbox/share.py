@@ -144,6 +144,18 @@ def runs_cgroups(
     return within
 
 
+def release_parent(support: CgroupSupport) -> None:
+    """The parent removed if no run and no box is left in it (an agent's last act): else the
+    kernel refuses, and it stays for the agents still serving."""
+    if support.parent is None:
+        return
+    for folder in support.folders():
+        try:
+            folder.rmdir()
+        except OSError:
+            pass
+
+
 def machine_memory(support: CgroupSupport, meminfo: str = "/proc/meminfo") -> int:
     """Bytes the server's processes may use: the machine's RAM, or less where the cgroup it
     lives in (or one above) is limited."""

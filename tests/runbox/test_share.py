@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from runbox.cgroups import MB, CgroupSupport, RunCgroup, detect, sweep
-from runbox.share import Share, runs_cgroups
+from runbox.share import Share, release_parent, runs_cgroups
 
 pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason="needs root to make cgroups")
 
@@ -114,6 +114,16 @@ def test_a_parent_gone_is_made_again_with_its_limits(parent_of):
     limit = read_int(support.bases["memory"] / "memory.limit_in_bytes")
     assert limit == int(0.1 * server_memory()) // PAGE * PAGE
     assert run.remove()
+
+
+def test_the_last_agent_leaves_no_parent_but_one_in_use_stays(parent_of):
+    support = parent_of(Share(memory_share=0.1))
+    run = RunCgroup.create("run-4", support, memory_bytes=64 * MB, pids=8)
+    release_parent(support)  # another agent's run is in it: the kernel refuses
+    assert all(folder.is_dir() for folder in support.folders())
+    assert run.remove()
+    release_parent(support)
+    assert not any(folder.exists() for folder in support.folders())
 
 
 def test_runs_together_stay_within_the_parent_and_lose_a_process_of_theirs(parent_of):

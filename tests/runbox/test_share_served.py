@@ -39,6 +39,15 @@ def app(request):
         remove_empty(base.with_name(parent))
 
 
+def test_the_agent_that_stops_leaves_no_parent_behind(app):
+    """Its box made ahead and its runs gone, the parent goes with the last agent."""
+    parent = f"{RUNS}-{zlib.crc32(str(app.data_dir).encode()):08x}"
+    folders = [base.with_name(parent) for base in detect().folders()]
+    assert all(folder.is_dir() for folder in folders)
+    app.stop()
+    assert not [folder for folder in folders if folder.exists()]
+
+
 def may_lower_oom_score_adj() -> bool:
     status = Path("/proc/self/status").read_text()
     effective = int(next(x for x in status.splitlines() if x.startswith("CapEff:")).split()[1], 16)
