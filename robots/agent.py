@@ -399,8 +399,7 @@ class RobotAgent:
             ended = await self.estop(message.get("by", ""))
             await self.reply(message, {"stopped": len(ended), "runs": ended})
         elif kind == "robot.resume":
-            resumed = not await self._press_last_recorded() and await self.resume()
-            await self.reply(message, {"resumed": resumed})
+            await self.reply(message, {"resumed": await self.resume()})
         elif kind == "robot.sensors":
             await self.reply(message, {"sensors": await self.driver.sensors()})
         elif kind == "robot.state":
@@ -716,14 +715,6 @@ class RobotAgent:
         self.tokens.pop(active.token, None)
         active.process.kill(reason)
         return active.run_id
-
-    async def _press_last_recorded(self) -> bool:
-        """Whether the record's last word is a press (robots.stops records before it sends):
-        a resume that reaches the agent after it is stale. Redis orders a channel's messages
-        by each sender's clock, so a press sent after a resume may come first."""
-        stops = RobotStop.objects.filter(robot__name=self.name)
-        last = await database_sync_to_async(stops.first)()
-        return last is not None and last.kind == "estop"
 
     async def resume(self) -> bool:
         """After an emergency stop: the robot may move again, and its queue moves."""
