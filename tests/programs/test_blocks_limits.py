@@ -310,8 +310,8 @@ def test_the_pane_takes_no_more_source_than_a_program_may_have(pane):
 # -- a real server flooded by a student ------------------------------------------------------------
 
 
-def server_rss(appliance) -> int:
-    status = Path(f"/proc/{appliance.server.pid}/status").read_text()
+def rss_of(pid: int) -> int:
+    status = Path(f"/proc/{pid}/status").read_text()
     return int(re.search(r"VmRSS:\s+(\d+) kB", status)[1]) * 1024
 
 
@@ -359,11 +359,17 @@ def figures(answers: list[tuple[int, float]]) -> str:
     return f"{len(answers)} (median {took[len(took) // 2]:.0f} ms, max {took[-1]:.0f} ms)"
 
 
-def test_a_run_of_the_blocks_fails_naming_the_block(appliance, student):
-    run = appliance.run_program(student["program"], robot="sim-flood", token=student["token"])
-    run = appliance.wait_run(run["id"], timeout=60)
-    stderr = appliance.api("GET", f"/api/runs/{run['id']}/log?stream=stderr").text
+def test_a_run_of_the_blocks_fails_naming_the_block_and_its_agent_stays_small(any_appliance):
+    """Embedded (the agent in the server) and split (`robotide agent sim` on its own): the
+    run fails saying which block is too large, and the agent's process compiled nothing."""
+    app = any_appliance
+    agent = app.agent if app.mode == "split" else app.server
+    program = app.create_program("bomb", IF_BOMB, language="blocks")
+    before = rss_of(agent.pid)
+    run = app.wait_run(app.run_program(program["id"])["id"], timeout=120)
+    stderr = app.api("GET", f"/api/runs/{run['id']}/log?stream=stderr").text
     assert run["state"] == "failed" and IF_BOMB_SAYS in stderr, stderr
+    assert rss_of(agent.pid) - before < 50 * MB
 
 
 def test_healthz_and_the_estop_answer_while_a_student_floods_the_server(appliance, student):
@@ -374,7 +380,7 @@ def test_healthz_and_the_estop_answer_while_a_student_floods_the_server(applianc
     less than 50 MB."""
     # The pane once, for what any first use starts (the workers): the flood meets them.
     assert pane_poster(appliance, student, SMALL)().status_code == 200
-    baseline = server_rss(appliance)
+    baseline = rss_of(appliance.server.pid)
     calm = [ask_healthz_and_estop(appliance) for _ in range(10)]  # for the figures printed
 
     flooding = threading.Event()
@@ -421,7 +427,7 @@ def test_healthz_and_the_estop_answer_while_a_student_floods_the_server(applianc
         flooding.clear()
         for thread in threads:
             thread.join(timeout=180)
-    grown = server_rss(appliance) - baseline
+    grown = rss_of(appliance.server.pid) - baseline
     print(
         f"calm: healthz {figures([h for h, _ in calm])}, e-stop {figures([e for _, e in calm])}"
         f"\nflood: {len(refusals)} posts refused, {len(runs)} runs; healthz {figures(healthz)}, "
