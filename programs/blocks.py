@@ -18,7 +18,9 @@ literals, numbers are parsed and written anew, operators and modes are looked up
 and variables become identifiers made here (valid, no keyword, no builtin, none twice). The
 result is compiled before it is returned. Whatever is wrong (not JSON, not a workspace, an
 unknown block, a field outside its table) is a BlocksError, a ValueError whose message names
-the block.
+the block. Blocks that would make too much Python (see the caps below) are refused before any
+code is made. The server and the agents never call this: programs.blocks_worker runs it in a
+worker process with limits of its own.
 """
 
 import builtins
