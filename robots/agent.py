@@ -47,7 +47,7 @@ from runbox.ahead import Ahead, discard
 from runbox.box import Launch, Listener, make_box
 from runbox.isolation import InForce, IsolationUnavailable, Policy, run_uid
 from runbox.relays import relay_to_host
-from runbox.share import Share, release_parent, runs_cgroups
+from runbox.share import Share, runs_cgroups
 from runbox.supervisor import RunProcess
 from runbox.watch import RunWatch, signal_account
 from runlogs.writer import QuotaRunProcess
@@ -334,8 +334,6 @@ class RobotAgent:
         watchers = [a.watcher for a in self.runs.values() if a.watcher]
         if watchers:
             await asyncio.wait(watchers, timeout=settings.RUN_DEFAULTS["stop_grace_seconds"] + 2)
-        if getattr(self, "cgroups", None) is not None:  # the last agent leaves no parent behind
-            await asyncio.to_thread(release_parent, self.cgroups)
         await self.camera.close()
         await self.server.close()
         shutil.rmtree(self.socket_dir, ignore_errors=True)
@@ -399,7 +397,8 @@ class RobotAgent:
             ended = await self.estop(message.get("by", ""))
             await self.reply(message, {"stopped": len(ended), "runs": ended})
         elif kind == "robot.resume":
-            await self.reply(message, {"resumed": await self.resume()})
+            resumed = not await self._press_last_recorded() and await self.resume()
+            await self.reply(message, {"resumed": resumed})
         elif kind == "robot.sensors":
             await self.reply(message, {"sensors": await self.driver.sensors()})
         elif kind == "robot.state":
@@ -715,6 +714,14 @@ class RobotAgent:
         self.tokens.pop(active.token, None)
         active.process.kill(reason)
         return active.run_id
+
+    async def _press_last_recorded(self) -> bool:
+        """Whether the record's last word is a press (robots.stops records before it sends):
+        a resume that reaches the agent after it is stale. Redis orders a channel's messages
+        by each sender's clock, so a press sent after a resume may come first."""
+        stops = RobotStop.objects.filter(robot__name=self.name)
+        last = await database_sync_to_async(stops.first)()
+        return last is not None and last.kind == "estop"
 
     async def resume(self) -> bool:
         """After an emergency stop: the robot may move again, and its queue moves."""

@@ -16,7 +16,7 @@ from django.core.exceptions import PermissionDenied
 from django.db import connections
 
 from robots import stops
-from robots.bus import ask_agent
+from robots.bus import ask_agent, send_to_agent
 from robots.models import Robot, RobotStop
 from tests.waiting import until
 
@@ -144,3 +144,21 @@ async def test_a_press_recorded_before_its_reply_shows_on_the_record_at_once(
     assert record.pk == pressed.pk and record.runs == [] and record.note == ""
     await in_sync_thread(stops.resume)(teacher, robot, "the API")  # hers alone: she may
     assert not await robot_stopped_for_its_agent(sim_agent)
+
+
+@database_sync_to_async
+def recorded(robot, events) -> None:
+    for kind, user in events:
+        RobotStop.objects.create(
+            robot=robot, kind=kind, user=user, username=user.username, via="the API"
+        )
+
+
+async def test_a_resume_reaching_the_agent_after_a_press_recorded_later_is_stale(sim_agent):
+    """Redis orders a channel's messages by each sender's clock: a press recorded (and sent)
+    after a resume may still reach the agent first. The record's last word decides."""
+    robot, teacher, student = await lab()
+    await recorded(robot, [("estop", student), ("resume", student), ("estop", teacher)])
+    await send_to_agent("sim", "robot.estop", by=TEACHER)  # the teacher's press, first
+    await send_to_agent("sim", "robot.resume")  # the student's resume, late
+    assert await robot_stopped_for_its_agent(sim_agent)
