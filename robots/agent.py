@@ -47,7 +47,7 @@ from runbox.ahead import Ahead, discard
 from runbox.box import Launch, Listener, make_box
 from runbox.isolation import InForce, IsolationUnavailable, Policy, run_uid
 from runbox.relays import relay_to_host
-from runbox.share import Share, runs_cgroups
+from runbox.share import Share, release_parent, runs_cgroups
 from runbox.supervisor import RunProcess
 from runbox.watch import RunWatch, signal_account
 from runlogs.writer import QuotaRunProcess
@@ -334,6 +334,8 @@ class RobotAgent:
         watchers = [a.watcher for a in self.runs.values() if a.watcher]
         if watchers:
             await asyncio.wait(watchers, timeout=settings.RUN_DEFAULTS["stop_grace_seconds"] + 2)
+        if getattr(self, "cgroups", None) is not None:  # the last agent leaves no parent behind
+            await asyncio.to_thread(release_parent, self.cgroups)
         await self.camera.close()
         await self.server.close()
         shutil.rmtree(self.socket_dir, ignore_errors=True)
