@@ -9,7 +9,14 @@ import sys
 
 import httpx
 
-from tests.appliance import ROBOTIDE, SQLITE, free_port, migrated_sqlite, wait_for
+from tests.appliance import (
+    ROBOTIDE,
+    SQLITE,
+    START_TIMEOUT,
+    free_port,
+    migrated_sqlite,
+    wait_for,
+)
 
 
 def start(data_dir, port, **env):
@@ -27,12 +34,16 @@ def serve_then_stop(data_dir, **env) -> str:
     port = free_port()
     proc = start(data_dir, port, **env)
     try:
-        wait_for(lambda: httpx.get(f"http://127.0.0.1:{port}/accounts/login/").status_code == 200)
+        # A first start migrates a database from nothing: seconds when quiet, far more on a
+        # busy machine. Only a start that fails waits out the deadline; one that ended says so.
+        wait_for(lambda: httpx.get(f"http://127.0.0.1:{port}/accounts/login/").status_code == 200,
+                 timeout=START_TIMEOUT, what="the first start's server",
+                 gone=lambda: proc.poll() is not None)  # fmt: skip
         login = httpx.get(f"http://127.0.0.1:{port}/programs/")
         assert login.status_code == 302
     finally:
         proc.send_signal(signal.SIGTERM)
-        output, _ = proc.communicate(timeout=20)
+        output, _ = proc.communicate(timeout=START_TIMEOUT)
     assert proc.returncode == 0, output
     return output
 
