@@ -89,8 +89,9 @@ def robot_limit(robot: Robot, box_cap: int | None = None) -> int | None:
 def going() -> models.Q:
     """Runs that take a share: running, or admitted and on their way (an agent's claim or
     an admission marks it); not those asked and not decided on yet, nor those queued."""
-    taken = models.Q(pid__isnull=False) | models.Q(started__isnull=False)
-    return models.Q(state=Run.State.RUNNING) | (models.Q(state=Run.State.STARTING) & taken)
+    taken = models.Q(state=Run.State.RUNNING) | models.Q(pid__isnull=False)
+    # state IN (...) first: the state index finds the few runs not ended among many.
+    return models.Q(state__in=Run.ACTIVE) & (taken | models.Q(started__isnull=False))
 
 
 def is_share_wait(reason: str) -> bool:
