@@ -7,7 +7,7 @@ from django.utils.translation import ngettext
 
 from programs.models import Program, Revision, Run, Share
 from programs.shares import add_share
-from robotide.admin import action_with_form
+from robotide.admin import NamesChecked, action_with_form
 from robots.runs import AgentUnreachable, request_stop
 
 
@@ -41,7 +41,7 @@ class ShareWithGroupForm(forms.Form):
 
 
 @admin.register(Program)
-class ProgramAdmin(admin.ModelAdmin):
+class ProgramAdmin(NamesChecked, admin.ModelAdmin):
     list_display = ["name", "owner", "language", "updated", "shares_count"]
     list_filter = ["language", ("owner__groups", admin.RelatedOnlyFieldListFilter)]
     search_fields = ["name", "owner__username", "source"]

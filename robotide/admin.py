@@ -10,6 +10,7 @@ from django.template.response import TemplateResponse
 from django.utils.translation import gettext as _
 from django.utils.translation import gettext_lazy, ngettext
 
+from robotide import names
 from robotide.models import ApiToken, ClassTeacher, DirectoryAccount, ProviderAccount
 from robotide.security import AdminLoginForm
 
@@ -46,8 +47,19 @@ def action_with_form(
     return TemplateResponse(request, "admin/action_form.html", context)
 
 
+class NamesChecked:
+    """A ModelAdmin mixin: its ``name`` field refuses what the pages and the API refuse in a
+    name (robotide.names), without a validator on the model (that would be a migration)."""
+
+    def formfield_for_dbfield(self, db_field, request, **kwargs):
+        field = super().formfield_for_dbfield(db_field, request, **kwargs)
+        if field is not None and db_field.name == "name":
+            field.validators.append(names.validate)
+        return field
+
+
 @admin.register(ApiToken)
-class ApiTokenAdmin(admin.ModelAdmin):
+class ApiTokenAdmin(NamesChecked, admin.ModelAdmin):
     list_display = ["user", "name", "created", "last_used"]
     search_fields = ["user__username", "name"]
     readonly_fields = ["digest", "created", "last_used"]
@@ -77,7 +89,7 @@ admin.site.unregister(Group)
 
 
 @admin.register(Group)
-class GroupAdmin(auth_admin.GroupAdmin):
+class GroupAdmin(NamesChecked, auth_admin.GroupAdmin):
     list_display = ["name", "members", "teacher_names"]
     inlines = [TeacherInline]
 

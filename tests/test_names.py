@@ -133,3 +133,15 @@ def test_an_imported_programs_name_loses_the_characters_a_name_may_not_hold(staf
         assert response.status_code == 200, response.content
         upload.seek(0)
     assert Program.objects.filter(owner=staff, name="driver").count() == 1
+
+
+@pytest.mark.parametrize("model", ["programs/program", "auth/group"])
+def test_the_admin_says_why_a_name_is_refused(staff, model):
+    staff.is_superuser = True
+    staff.save()
+    client = Client()
+    client.force_login(staff)
+    before = Program.objects.count(), Group.objects.count()
+    page = client.post(f"/admin/{model}/add/", {"name": "x\u202ey", "language": "python"})
+    assert page.status_code == 200 and "U+202E" in page.content.decode()
+    assert (Program.objects.count(), Group.objects.count()) == before
