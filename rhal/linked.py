@@ -18,6 +18,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import time
 from collections.abc import Awaitable, Callable
 from typing import Generic, TypeVar
 
@@ -26,9 +27,11 @@ from rhal.errors import RhalError, RobotConnectionError
 logger = logging.getLogger(__name__)
 
 L = TypeVar("L")
+T = TypeVar("T")
 
 BACKOFF_FIRST, BACKOFF_MAX = 0.2, 5.0  # s between reconnection attempts, doubling
 HALT_WAIT = 0.5  # s a stop on a failing link may take before it is given up
+QUIET_SLICES = 10  # a silence is heard out in this many slices of its length
 
 
 class LinkKeeper(Generic[L]):
@@ -127,6 +130,44 @@ class LinkKeeper(Generic[L]):
             except (OSError, RobotConnectionError) as exc:
                 self.lost = f"reconnecting failed: {self._reason(exc)}"
                 delay = min(2 * delay, BACKOFF_MAX)
+
+
+# -- silence, as the robot made it --------------------------------------------------------------
+# A process starved of the CPU (a busy machine; a program hogging the robot's computer) wakes
+# to its timers before it reads what the robot sent meanwhile: its own sleep is not the
+# robot's silence. Silence is therefore counted in slices, each at most its own length,
+# however late the process got to it: as quick as before when the process runs on time.
+
+
+async def heard_within(receive: Callable[[], Awaitable[T]], timeout: float | None) -> T:
+    """``await receive()`` (cancel-safe: a stream read), or TimeoutError once the robot has
+    been silent for ``timeout`` s of this process's waking time."""
+    if timeout is None:
+        return await receive()
+    for _ in range(QUIET_SLICES):
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(timeout / QUIET_SLICES):
+                return await receive()
+    raise TimeoutError
+
+
+class QuietClock:
+    """How long a peer has been silent, for a watcher that looks every ``step`` s: a look
+    counts at most ``step`` since the one before, so a starved process's sleep counts once."""
+
+    def __init__(self, step: float) -> None:
+        self.step = step
+        self.heard()
+
+    def heard(self) -> None:
+        self._quiet, self._looked = 0.0, time.monotonic()
+
+    def look(self) -> float:
+        """Seconds of silence so far."""
+        now = time.monotonic()
+        self._quiet += min(now - self._looked, self.step)
+        self._looked = now
+        return self._quiet
 
 
 async def _bounded(step: Awaitable[None]) -> None:

@@ -40,7 +40,7 @@ from rhal import arcos
 from rhal.base import Robot
 from rhal.errors import RobotConnectionError
 from rhal.kinematics import compass_heading
-from rhal.linked import LinkKeeper, StreamLink
+from rhal.linked import LinkKeeper, StreamLink, heard_within
 from rhal.pioneer_models import MODELS
 from rhal.pioneer_units import Units, fit
 
@@ -402,8 +402,7 @@ class _Link(StreamLink):
     async def packet(self, timeout: float | None = None) -> bytes:
         """The next valid packet body; TimeoutError, or OSError when the link is gone."""
         while not self._pending:
-            async with asyncio.timeout(timeout):
-                data = await self.read()
+            data = await heard_within(self.read, timeout)
             for tap in self._taps:
                 tap(data)
             self._pending.extend(self._parser.feed(data))
@@ -417,16 +416,15 @@ async def _say_close(link: _Link) -> None:
 async def _sync_reply(link: _Link, step: int) -> bytes | None:
     """The robot's echo of SYNC ``step``, or None if it did not come in time."""
     with contextlib.suppress(TimeoutError):
-        async with asyncio.timeout(SYNC_WAIT):
-            while True:
-                body = await link.packet()
-                if body[0] == step:
-                    return body
-                if arcos.is_sip(body):
-                    # Still open for an earlier client (this one, before a crash): close it.
-                    await link.send(arcos.encode(arcos.CLOSE))
-                    return None
-                # Anything else is a stale echo of an earlier try: skip it.
+        while True:
+            body = await link.packet(SYNC_WAIT)
+            if body[0] == step:
+                return body
+            if arcos.is_sip(body):
+                # Still open for an earlier client (this one, before a crash): close it.
+                await link.send(arcos.encode(arcos.CLOSE))
+                return None
+            # Anything else is a stale echo of an earlier try: skip it.
     return None
 
 
