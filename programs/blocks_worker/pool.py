@@ -16,6 +16,7 @@ from django.utils.translation import gettext as _
 from programs.blocks import HEADER, BlocksError
 from runbox import SYSTEM_PATH
 from runbox.isolation import tool
+from runbox.oom import first_to_go
 
 # The folder holding the `programs` package: the worker's working folder, whence `-m` finds it.
 SOURCE_ROOT = Path(__file__).resolve().parents[2]
@@ -44,13 +45,16 @@ def to_runnable_python(source: str) -> str:
 
 
 def worker_command(memory: int, seconds: int) -> list[str]:
-    """A worker, its address space and lifetime CPU set by util-linux's prlimit and its
-    priority by coreutils' nice: nothing runs between fork and exec in the threaded server."""
-    return [
+    """A worker, its address space and lifetime CPU set by util-linux's prlimit, its priority
+    by coreutils' nice and its oom_score_adj by choom (the OOM killer's first choice, with the
+    runs, not the server's -500 it would inherit): nothing runs between fork and exec in the
+    threaded server."""
+    worker = [
         tool("prlimit"), f"--as={memory}", f"--cpu={LIFETIME_CPU_SECONDS}", "--core=0", "--",
         tool("nice"), "-n", str(NICENESS),
         sys.executable, "-E", "-s", "-m", "programs.blocks_worker", str(seconds),
     ]  # fmt: skip
+    return first_to_go(worker, tool("choom"))
 
 
 class Worker:

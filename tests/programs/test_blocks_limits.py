@@ -172,7 +172,7 @@ LARGE = ws(*(count_up(n) for n in range(2400)), variables=["a"])  # 9600 blocks
 
 def test_blocks_are_made_into_python_in_a_worker_with_its_limits():
     """Not in this process: in a worker with the address space, CPU and priority the settings
-    give, set before it ran anything (prlimit, nice), answering the next programs too."""
+    give, set before it ran anything (prlimit, nice, choom), answering the next programs too."""
     from programs import blocks_worker
 
     others = worker_processes()  # this test process's pool may have workers from other tests
@@ -185,6 +185,7 @@ def test_blocks_are_made_into_python_in_a_worker_with_its_limits():
     assert int(cpu[1]) <= settings.BLOCKS_WORKER_SECONDS + 10 and int(cpu[2]) == 3600, limits
     stat = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     assert int(stat[16]) == os.getpriority(os.PRIO_PROCESS, 0) + 10  # its nice value
+    assert Path(f"/proc/{pid}/oom_score_adj").read_text().strip() == "1000"  # before the server
     with pytest.raises(blocks.BlocksError, match=re.escape(IF_BOMB_SAYS)):
         blocks_worker.to_python(IF_BOMB)
     assert pid in worker_processes()  # the same worker, kept for the next
