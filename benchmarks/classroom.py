@@ -23,9 +23,10 @@ phases, one after the other: calm (the class alone), then attack (the class, and
   each was answered is printed.
 Measured per phase (SECONDS each, after WARM seconds of the class alone): page p50/p99, e-stop
 p50/p99, runs' ask -> end, the server's RSS (sampled every 0.1 s: end and peak) and the runs'
-(sum over the server's child processes, every second), CPU of the server and of this process
-(all the clients). Ratios attack / calm in the same run. Aims (printed, not asserted): e-stop
-p99 < 100 ms under attack, page p99 within 1.5x of the calm phase's.
+(summed over the server's child processes, every second), CPU (% of one CPU) of the server, of
+this process (all the clients) and of the machine. Ratios attack / calm in the same run.
+Aims (printed, not asserted): e-stop p99 < 100 ms under attack, page p99 within 1.5x of the
+calm phase's.
 """
 
 from __future__ import annotations
@@ -64,7 +65,13 @@ from benchmarks.common import (
     proc_status,
     say,
 )
-from benchmarks.fleet import children_map, descendants, ready
+from benchmarks.fleet import (
+    CLK_TCK,
+    children_map,
+    descendants,
+    machine_ticks,
+    ready,
+)
 
 BENCH = "classroom"
 PASSWORD = "class-pass-1234"
@@ -163,19 +170,21 @@ def mem_available() -> int:
 # -- memory, sampled in a thread ---------------------------------------------------------------
 
 
-class MemorySampler:
+class Sampler:
     """The server's VmRSS every 0.1 s; every second, the RSS summed over its child processes
-    (the runs) and the machine's MemAvailable. Samples are (wall-clock time, bytes)."""
+    (the runs), and the machine's MemAvailable and busy CPU time.
+    Samples are (wall-clock time, bytes or CPU seconds)."""
 
     def __init__(self, pid: int):
         self.pid = pid
         self.server: list[tuple[float, int]] = []
         self.runs: list[tuple[float, int]] = []
+        self.machine_cpu: list[tuple[float, float]] = []
         self.available: list[tuple[float, int]] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, daemon=True)
 
-    def __enter__(self) -> MemorySampler:
+    def __enter__(self) -> Sampler:
         self._thread.start()
         return self
 
@@ -190,17 +199,27 @@ class MemorySampler:
             with contextlib.suppress(OSError, KeyError):
                 self.server.append((now, proc_status(self.pid)["VmRSS"]))
             if tick % 10 == 0:
-                self.runs.append((now, self._runs_rss()))
-                self.available.append((now, mem_available()))
+                with contextlib.suppress(OSError):  # the server gone: the phases say so
+                    self._each_second(now)
             tick += 1
             self._stop.wait(0.1)
 
-    def _runs_rss(self) -> int:
-        total = 0
-        for pid in descendants(self.pid, children_map()):
+    def _each_second(self, now: float) -> None:
+        runs = descendants(self.pid, children_map())
+        rss = 0
+        for pid in runs:
             with contextlib.suppress(OSError, KeyError):
-                total += proc_status(pid).get("VmRSS", 0)
-        return total
+                rss += proc_status(pid).get("VmRSS", 0)
+        self.runs.append((now, rss))
+        self.machine_cpu.append((now, machine_ticks()[0] / CLK_TCK))
+        self.available.append((now, mem_available()))
+
+
+def cpu_share(samples: list[tuple[float, float]]) -> float | None:
+    """% of one CPU over cumulative (time, CPU seconds) samples."""
+    if len(samples) < 2 or samples[-1][0] <= samples[0][0]:
+        return None
+    return (samples[-1][1] - samples[0][1]) / (samples[-1][0] - samples[0][0]) * 100
 
 
 def within(samples: list, window: tuple[float, float]) -> list:
@@ -365,7 +384,7 @@ def others(figures: dict, good=200) -> str:
     return ", ".join(f"{n} x {a}" for n, a in counted)
 
 
-def phase_figures(classroom: Classroom, memory: MemorySampler, phase: Phase) -> dict:
+def phase_figures(classroom: Classroom, memory: Sampler, phase: Phase) -> dict:
     record, window = classroom.record, phase.window
     server = [b for _, b in within(memory.server, window)]
     runs = [b for _, b in within(memory.runs, window)]
@@ -380,10 +399,11 @@ def phase_figures(classroom: Classroom, memory: MemorySampler, phase: Phase) -> 
         "server peak": max(server) / MB if server else None,
         "runs peak": max(runs) / MB if runs else None,
         "available min": min(available) / MB if available else None,
+        "machine cpu": cpu_share(within(memory.machine_cpu, window)),
     }
 
 
-def figures_of(classroom: Classroom, memory: MemorySampler, after_mb: float | None) -> list:
+def figures_of(classroom: Classroom, memory: Sampler, after_mb: float | None) -> list:
     phases = {p.name: p for p in classroom.phases}
     calm, attack = (phase_figures(classroom, memory, phases[n]) for n in ("calm", "attack"))
     out = []
@@ -427,6 +447,8 @@ def figures_of_phase(name: str, f: dict, phase: Phase) -> list[Figure]:
         Figure(BENCH, f"{name}: machine's MemAvailable, least", f["available min"], "MB"),
         Figure(BENCH, f"{name}: CPU of the server (% of one CPU)", phase.server_cpu, "%"),
         Figure(BENCH, f"{name}: CPU of all the clients (this process)", phase.client_cpu, "%"),
+        Figure(BENCH, f"{name}: CPU of the machine, busy ({os.cpu_count()} CPUs)",
+               f["machine cpu"], "%"),
         Figure(BENCH, f"{name}: load average (1 min) at its start", phase.load, ""),
     ]  # fmt: skip
 
@@ -479,8 +501,8 @@ def tree_version() -> str:
         done = subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True)
         return done.stdout.strip()
 
-    dirty = [line for line in git("status", "--porcelain", "-uno").splitlines() if line]
-    changes = f" + {len(dirty)} changed files" if dirty else ""
+    changed = git("status", "--porcelain", "-uno", "--", ".", ":!benchmarks").splitlines()
+    changes = f" + {len(changed)} changed files beside benchmarks/" if changed else ""
     return f"{ROOT} at {git('rev-parse', '--short', 'HEAD')}{changes}"
 
 
@@ -505,7 +527,7 @@ def run(argv: list[str] | None = None) -> list[Figure]:
         add_robots(app, [f"lab{n + 1}" for n in range(options.robots)] + [ESTOP_ROBOT])
         say(f"appliance, users and robots ready in {time.monotonic() - started:.0f} s")
         classroom = Classroom(app, options)
-        with MemorySampler(app.server.pid) as memory:
+        with Sampler(app.server.pid) as memory:
             attacker = asyncio.run(classroom.run(tokens, students))
             time.sleep(5.0)
             after = proc_status(app.server.pid)["VmRSS"] / MB
