@@ -471,7 +471,8 @@ def print_answers(attacker: Attacker, data_dir: Path) -> None:
         for said, times in sorted(took.items(), key=lambda kv: -len(kv[1]))[:6]:
             span = f"{min(times):.2f}-{max(times):.2f}" if len(times) > 1 else f"{times[0]:.2f}"
             say(f"    {len(times)} x {said} [{span} s]")
-    say(f"  most of the attacker's runs running at once: {dict(attacker.most_running)}")
+    most = ", ".join(f"{kind} {n}" for kind, n in attacker.most_running.most_common())
+    say(f"  most of the attacker's runs seen running at one look (each kind's own most): {most}")
     for reason, count in attacker.queued_reasons.most_common(4):
         say(f"  seen queued ({count} looks): {reason}")
     floods = [run for run, kind in attacker.kind_of.items() if kind == "flood"]

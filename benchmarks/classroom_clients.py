@@ -237,7 +237,8 @@ class Attacker:
         self.kind_of: dict[int, str] = {}  # run id -> its kind
         self.runs: dict[int, dict] = {}  # run id -> the API's last answer about it
         self.seen: dict[int, list[str]] = {}  # run id -> the states it was seen in, in order
-        self.most_running: Counter = Counter()  # kind -> most runs of it running at once
+        # kind (or all together) -> most runs of it seen running at one look
+        self.most_running: Counter = Counter()
         self.queued_reasons: Counter = Counter()
 
     async def attack(self, stop: asyncio.Event) -> None:
@@ -346,6 +347,7 @@ class Attacker:
                         running[kind] += 1
                     elif run["state"] == "queued":
                         self.queued_reasons[f"{kind}: {short(run['reason'], 120)}"] += 1
+                running["all kinds together"] = sum(running.values())
                 for kind, count in running.items():
                     self.most_running[kind] = max(self.most_running[kind], count)
             await asyncio.sleep(0.5)
