@@ -7,6 +7,7 @@ from django.utils import timezone
 from django.utils.translation import gettext, gettext_noop
 from django.utils.translation import gettext_lazy as _
 
+from robotide import names
 from robots.isolation_words import isolation_shown
 
 # Settings for the runs on a robot; anything else in its `settings` goes to its driver.
@@ -396,6 +397,8 @@ def robots_for_user(user):
 
 def get_robot_for_user(user, name: str) -> Robot:
     try:
+        if names.problem(name):  # none is named so, and PostgreSQL cannot look for NUL
+            raise Robot.DoesNotExist
         return robots_for_user(user).get(name=name)
     except Robot.DoesNotExist:
         raise Http404(gettext("No robot named %(name)s.") % {"name": repr(name)}) from None

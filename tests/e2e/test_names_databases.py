@@ -24,3 +24,16 @@ def test_a_name_with_nul_is_a_422_on_either_database(any_appliance):
     assert not wrong, wrong
     names = [p["name"] for p in app.api("GET", "/api/programs").json()]
     assert not [name for name in names if re.search(r"[\x00-\x1f]", name)]
+
+
+def test_the_pages_take_a_name_with_nul_without_a_server_error(any_appliance):
+    """Forms that look a name up (a program's robot, its share target): no robot or user is
+    so named, said as such, on either database."""
+    app = any_appliance
+    program = app.create_program("q", "print(1)\n")
+    session = app.session()
+    csrf = {"X-CSRFToken": session.cookies["csrftoken"]}
+    run = session.post(f"/programs/{program['id']}/run", data={"robot": BAD}, headers=csrf)
+    assert run.status_code == 404, run.text[:300]
+    share = session.post(f"/programs/{program['id']}/shares/", data={"target": BAD}, headers=csrf)
+    assert share.status_code == 200 and "U+0000" in share.text, share.text[:300]
