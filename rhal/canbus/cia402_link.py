@@ -19,6 +19,7 @@ from canopen.profiles.p402 import State402
 
 from rhal.canbus.profile import NOTIFIER_CYCLE, Link
 from rhal.errors import RobotConnectionError
+from rhal.linked import QuietClock
 
 if TYPE_CHECKING:
     from rhal.canbus.cia402 import Cia402
@@ -29,9 +30,13 @@ CW_ENABLE = 0x000F  # controlword: enable operation
 CW_HALT = 0x0100  # controlword bit 8: halt
 CW_SHUTDOWN = 0x0006  # controlword: shutdown, to READY TO SWITCH ON (power stage off)
 NMT_OPERATIONAL = 5
-# Set-up goes by SDO only: a drive (or a loaded computer) slow to answer once is not gone;
-# canopen's 0.3 s failed the set-up now and then on a busy 2-core machine.
-SDO_RESPONSE_TIMEOUT = 1.0
+# Set-up waits are deadlines for an answer, not how long one takes: a drive answers in
+# milliseconds, but the computer it answers may be busy (a program hogging the robot's
+# computer), and then its own threads hear the answer late. canopen's 0.3 s SDO and 0.2-0.8 s
+# state-machine waits, and 1 s here, failed the set-up on a 2-core machine at a load of 20.
+# Only a drive that does not answer at all waits them out.
+SDO_RESPONSE_TIMEOUT = 3.0
+SETUP_WAIT = 3.0  # s, at least, for a TPDO, a state change or a heartbeat during set-up
 #: The PDOs the driver maps: (TPDO or RPDO, number) -> objects. TPDOs go on every SYNC, the
 #: RPDO at once; the drives' other predefined PDOs are switched off.
 PDO_LAYOUT = {
@@ -50,8 +55,8 @@ class Cia402Link(Link):
         self.network: canopen.Network | None = None
         self.nodes: dict[str, canopen.BaseNode402] = {}
         self.sizes: dict[int, int] = {}  # COB-ID -> the only length its frames may have
-        now = time.monotonic()
-        self.heard = dict.fromkeys(SIDES, now)  # when each drive's last heartbeat came
+        # How long each drive's heartbeat has been missing, as the watch ticks.
+        self.quiet = {side: QuietClock(profile.tick) for side in SIDES}
         self.nmt: dict[str, int | None] = dict.fromkeys(SIDES)  # NMT state it said
         self.nmt_seen: dict[str, int | None] = dict.fromkeys(SIDES)  # the same, thread side
         self.status: dict[str, int | None] = dict.fromkeys(SIDES)
@@ -76,10 +81,9 @@ class Cia402Link(Link):
         reason = self.bus_problem()
         if reason:
             return reason
-        now = time.monotonic()
         for side in SIDES:
             what = self.profile.describe(side)
-            if now - self.heard[side] > self.profile.timeout:
+            if self.quiet[side].look() > self.profile.timeout:
                 return f"no heartbeat from {what} for {self.profile.timeout:g} s"
             state = self.nmt[side]
             if state == 0:
@@ -89,7 +93,7 @@ class Cia402Link(Link):
         return None
 
     def _heartbeat(self, side: str, state: int) -> None:
-        self.heard[side] = time.monotonic()
+        self.quiet[side].heard()
         self.nmt[side] = state
 
     def _tpdo(self, side: str, values: dict[int, int]) -> None:
@@ -129,9 +133,9 @@ class Cia402Link(Link):
             node_id = profile.nodes[side]
             node = canopen.BaseNode402(node_id, profile.eds)
             # canopen's waits, stretched to a few SYNC periods so a slow bus still makes it.
-            node.TIMEOUT_CHECK_TPDO = max(0.2, 4 * profile.sync)
-            node.TIMEOUT_SWITCH_STATE_SINGLE = max(0.4, 8 * profile.sync)
-            node.TIMEOUT_SWITCH_STATE_FINAL = max(0.8, 16 * profile.sync)
+            node.TIMEOUT_CHECK_TPDO = max(SETUP_WAIT, 4 * profile.sync)
+            node.TIMEOUT_SWITCH_STATE_SINGLE = max(SETUP_WAIT / 3, 8 * profile.sync)
+            node.TIMEOUT_SWITCH_STATE_FINAL = max(SETUP_WAIT, 16 * profile.sync)
             node.sdo.RESPONSE_TIMEOUT = SDO_RESPONSE_TIMEOUT
             network.add_node(node)
             node.nmt.add_heartbeat_callback(partial(self._on_heartbeat, side))
@@ -208,7 +212,7 @@ class Cia402Link(Link):
     def _enable(self, side: str, node: canopen.BaseNode402) -> None:
         self.check_aborted()
         what = self.profile.describe(side)
-        wait = max(0.5, 10 * self.profile.sync)
+        wait = max(SETUP_WAIT, 10 * self.profile.sync)
         for number in (1, 2):
             tpdo = node.tpdo[number]
             if tpdo.timestamp is None and tpdo.wait_for_reception(wait) is None:
@@ -231,7 +235,7 @@ class Cia402Link(Link):
     def _await_operational(self, side: str) -> None:
         # Its heartbeat must say OPERATIONAL before the link is watched: one sent before the
         # NMT start would otherwise read as the drive leaving OPERATIONAL.
-        deadline = time.monotonic() + max(0.5, 3 * self.profile.heartbeat)
+        deadline = time.monotonic() + max(SETUP_WAIT, 3 * self.profile.heartbeat)
         while self.nmt_seen[side] != NMT_OPERATIONAL:
             if time.monotonic() > deadline:
                 state = self.nmt_seen[side]

@@ -15,6 +15,7 @@ import cantools
 from rhal.canbus.profile import NOTIFIER_CYCLE, PROFILE_DIR, TICK, Link, Profile
 from rhal.errors import RobotConnectionError
 from rhal.kinematics import advance_pose, compass_heading
+from rhal.linked import QuietClock, heard_within
 
 if TYPE_CHECKING:
     from rhal.canbus.robot import CanRobot
@@ -138,8 +139,7 @@ class Dbc(Profile):
     async def _after_bring_up(self, link: _DbcLink) -> None:
         wait = 3 * self.timeout
         try:
-            async with asyncio.timeout(wait):
-                await link.first_feedback.wait()
+            await heard_within(link.first_feedback.wait, wait)
         except TimeoutError:
             raise RobotConnectionError(
                 f"no {self.feedback.name} frame from the base on {self.url!r} within {wait:g} s"
@@ -223,7 +223,7 @@ class Dbc(Profile):
             self._values[f"{message.name}.{name}"] = value
         if message is self.feedback:
             self._odometry(msg.timestamp)
-            link.heard = time.monotonic()
+            link.quiet.heard()
             link.first_feedback.set()
 
     def _odometry(self, stamp: float) -> None:
@@ -309,13 +309,13 @@ class _DbcLink(Link):
         self.profile: Dbc = profile
         self.bus: can.BusABC | None = None
         self.first_feedback = asyncio.Event()
-        self.heard = time.monotonic()
+        self.quiet = QuietClock(profile.tick)  # since the last feedback frame, as the watch ticks
 
     def problem(self) -> str | None:
         reason = self.bus_problem()
         if reason:
             return reason
-        if time.monotonic() - self.heard > self.profile.timeout:
+        if self.quiet.look() > self.profile.timeout:
             name = self.profile.feedback.name
             return f"no {name} frame from the base for {self.profile.timeout:g} s"
         return None

@@ -57,7 +57,11 @@ VOLTAGE_ENABLED, REMOTE, TARGET_REACHED = 0x0010, 0x0200, 0x0400
 HALT, FAULT_RESET = 0x0100, 0x0080
 SUPPORTED_MODES = (1, 3)  # as 0x6502 in the EDS says: profile position and profile velocity
 ABORT_VALUE_RANGE = 0x06090030
-STEP_WAIT = 0.1  # s a drive waits for the others to answer the SYNC before, at most
+# s a drive waits for the others to answer the SYNC before, at most: a deadline for a partner
+# that stopped answering while still OPERATIONAL (none does here), not how long it takes. A
+# partner that leaves OPERATIONAL says so at once. 0.1 s let a loaded machine's lagging drive
+# pair one wheel's hand turn with the other's older position.
+STEP_WAIT = 5.0
 
 
 def _channel(interface: str, channel: str | None) -> str:
@@ -226,6 +230,7 @@ class Cia402Drive:
             self._moving()
             self.online = self.operational = False
             network, self.network = self.network, None
+        self._answered(self.answered)  # a partner waiting on this drive waits no more
         if network is not None:
             network.disconnect()
 
@@ -246,6 +251,7 @@ class Cia402Drive:
                         if 0x1000 <= index < 0x2000:
                             del node.data_store[index]
                 self.operational = False
+            self._answered(self.answered)
             node.nmt.state = "INITIALISING"
             node.nmt.state = "PRE-OPERATIONAL"
             return
@@ -264,6 +270,7 @@ class Cia402Drive:
             for pdo in node.rpdo.map.values():
                 pdo.callbacks = [self._on_rpdo]
         self.operational = state == "OPERATIONAL"
+        self._answered(self.answered)
 
     def _on_sync(self, can_id, data, timestamp) -> None:
         with self.lock:

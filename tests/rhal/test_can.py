@@ -24,7 +24,7 @@ from rhal import NotSupportedError, RobotConnectionError
 from rhal.canbus import CanRobot, parse_url
 from rhal.options import driver_options
 from tests.rhal.can_emulator import Cia402BaseEmulator, Cia402Drive, DbcBaseEmulator
-from tests.waiting import until
+from tests.waiting import starve, until
 
 COUNTS_PER_METRE = 4096 / (math.pi * 0.2)  # the emulator's defaults: 4096 counts, 0.2 m wheel
 TRACK = 0.4
@@ -410,6 +410,19 @@ async def test_heartbeat_loss_is_a_clear_error_until_the_drive_returns(robot, ba
     assert base.commanded() == (0.0, 0.0), "motion does not resume by itself"
     await robot.drive(-0.1, 0.0)
     await until(lambda: base.right.velocity == wheel_targets(-0.1, 0.0)[1])
+
+
+async def test_a_driver_starved_of_the_cpu_keeps_the_drives(robot, base):
+    """A busy machine can leave the whole process, drives and driver alike, asleep for
+    longer than the heartbeat timeout: that is not a drive gone (on a loaded machine the link
+    was dropped, the drives stopped and brought up again)."""
+    await robot.drive(0.2, 0.0)
+    await until(lambda: base.left.velocity != 0)
+    stops, sent = base.stops, base.left.tpdos_sent
+    starve(3 * 0.5)  # three heartbeat timeouts
+    await until(lambda: base.left.tpdos_sent > sent + 20)  # the bus talks again, and is heard
+    assert robot.connected and base.stops == stops
+    assert base.left.velocity != 0  # the program's motion goes on
 
 
 async def test_a_drive_that_restarts_is_brought_up_again(robot, base):

@@ -2,8 +2,6 @@
 the link still takes bytes, the driver stops it on the wire before it lets the link go, and
 says why the link was lost. Each case runs against its protocol's emulator."""
 
-import time
-
 import pytest
 
 from rhal import RobotConnectionError
@@ -11,7 +9,7 @@ from rhal.mavlink import MavlinkRobot
 from rhal.pioneer import PioneerRobot
 from tests.rhal.arcos_emulator import ArcosEmulator
 from tests.rhal.mavlink_emulator import MavlinkEmulator
-from tests.waiting import until
+from tests.waiting import starve, until
 
 QUIET = 3600.0  # s: an emulator told to send this seldom has gone quiet
 
@@ -60,7 +58,7 @@ async def test_a_pioneer_driver_starved_of_the_cpu_keeps_its_link():
             await robot.drive(0.3, 0.0)
             await until(lambda: emulator.vel == 300)
             sips = emulator.sips_sent
-            time.sleep(1.5)  # the whole process starved: the emulator's SIPs wait too
+            starve(1.5)  # the whole process, emulator and driver alike
             await until(lambda: emulator.sips_sent > sips + 5)  # it talks again, and is heard
             assert robot.connected and emulator.names().count("OPEN") == 1
     finally:
