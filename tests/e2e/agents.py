@@ -9,8 +9,12 @@ from channels.db import database_sync_to_async
 from programs.models import Program, Run
 from robots.runs import start_run
 
+# s: a deadline for an event, not how long it takes; only a failing test waits it out, and a
+# busy machine (a load of 10-20 on two cores) makes a quick step take many seconds.
+DEADLINE = 60.0
 
-async def until(predicate, timeout=10.0, what="condition"):
+
+async def until(predicate, timeout=DEADLINE, what="condition"):
     deadline = time.monotonic() + timeout
     while not (result := predicate()):
         assert time.monotonic() < deadline, f"{what} not met within {timeout} s"
@@ -25,7 +29,7 @@ def run_program(user, robot, source: str, language="python") -> Run:
     return start_run(program, robot, user)
 
 
-async def finished(run: Run, timeout=30.0) -> Run:
+async def finished(run: Run, timeout=2 * DEADLINE) -> Run:
     deadline = time.monotonic() + timeout
     while True:
         await database_sync_to_async(run.refresh_from_db)()
@@ -33,6 +37,11 @@ async def finished(run: Run, timeout=30.0) -> Run:
             return run
         assert time.monotonic() < deadline, f"run {run.pk} still {run.state}"
         await asyncio.sleep(0.1)
+
+
+def log_of(run: Run) -> str:
+    """The run's whole log (output, errors and robotide's own lines), for a failure message."""
+    return run.log_path.read_text() if run.log_path.exists() else "(no log)"
 
 
 def output_of(run: Run) -> str:
