@@ -38,9 +38,12 @@ def free_port() -> int:
 # s an appliance may take to come up: under two test processes' load a split one (a fresh
 # PostgreSQL database migrated, collectstatic) took over 20 s. Only a failing start waits it.
 START_TIMEOUT = 120.0
+# s for anything else asked of an appliance (an agent up, a run ended): a deadline for the
+# event, not how long it takes. 20 s ran out at a load of 10-20 on two cores.
+DEADLINE = 60.0
 
 
-def wait_for(predicate, timeout=20.0, interval=0.05, what="condition", gone=None):
+def wait_for(predicate, timeout=DEADLINE, interval=0.05, what="condition", gone=None):
     """Wait for ``predicate``; ``gone``: says when waiting longer is pointless (a process
     that ended)."""
     deadline = time.monotonic() + timeout
@@ -181,7 +184,9 @@ class Appliance:
         assert "Sign out" in response.text, "login failed"
         return client
 
-    def wait_run(self, run_id: int, states=("finished", "failed", "stopped", "lost"), timeout=20):
+    def wait_run(
+        self, run_id: int, states=("finished", "failed", "stopped", "lost"), timeout=2 * DEADLINE
+    ):
         def done():
             run = self.api("GET", f"/api/runs/{run_id}").json()
             return run if run["state"] in states else None
