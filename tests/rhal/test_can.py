@@ -24,7 +24,7 @@ from rhal import NotSupportedError, RobotConnectionError
 from rhal.canbus import CanRobot, parse_url
 from rhal.options import driver_options
 from tests.rhal.can_emulator import Cia402BaseEmulator, Cia402Drive, DbcBaseEmulator
-from tests.waiting import starve, until
+from tests.waiting import DEADLINE, starve, until
 
 COUNTS_PER_METRE = 4096 / (math.pi * 0.2)  # the emulator's defaults: 4096 counts, 0.2 m wheel
 TRACK = 0.4
@@ -405,7 +405,7 @@ async def test_heartbeat_loss_is_a_clear_error_until_the_drive_returns(robot, ba
     await until(lambda: base.left.velocity == 0)
 
     await asyncio.to_thread(base.right.start)  # powered again: PRE-OPERATIONAL, not enabled
-    await until(lambda: robot.connected, timeout=15.0)
+    await until(lambda: robot.connected)
     assert base.right.state == "OPERATION ENABLED" and base.right.boots == 2
     assert base.commanded() == (0.0, 0.0), "motion does not resume by itself"
     await robot.drive(-0.1, 0.0)
@@ -431,7 +431,7 @@ async def test_a_drive_that_restarts_is_brought_up_again(robot, base):
         base.right.start()  # boots within the heartbeat timeout: the boot-up message tells
 
     await asyncio.to_thread(restart)
-    await until(lambda: base.right.state == "OPERATION ENABLED", timeout=15.0)
+    await until(lambda: base.right.state == "OPERATION ENABLED")
     await until(lambda: robot.connected)
     await robot.drive(0.1, 0.0)
     await until(lambda: base.right.velocity == wheel_targets(0.1, 0.0)[1])
@@ -750,7 +750,7 @@ async def test_dbc_feedback_loss_is_a_clear_error_until_it_returns(dbc_base):
         await dbc_robot.drive(0.2, 0.0)
     sent = len(dbc_base.commands)
     await dbc_base.replug()
-    await until(lambda: dbc_robot.connected, timeout=15.0)
+    await until(lambda: dbc_robot.connected)
     assert all(c["LinearSpeed"] == 0 for c in dbc_base.commands[sent:]), "no old speed again"
     await dbc_robot.drive(-0.1, 0.0)
     await until(lambda: dbc_base.commanded() == (-0.1, 0.0))
@@ -821,14 +821,14 @@ async def test_a_program_drives_turns_and_stops_on_either_base(make):
             await emu.unplug()
             await until(lambda: failing(bot.sensors))
             await emu.replug()
-            await until(lambda: bot.connected, timeout=15.0)
+            await until(lambda: bot.connected)
             await bot.drive(0.1, 0.0)
             await until(lambda: emu.commanded() == pytest.approx((0.1, 0.0), abs=1e-3))
     finally:
         await emu.stop()
 
 
-def _next_frame(bus, ident, timeout=3.0):
+def _next_frame(bus, ident, timeout=DEADLINE):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         frame = bus.recv(0.1)

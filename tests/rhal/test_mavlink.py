@@ -453,7 +453,7 @@ async def test_tcp_link_lost_then_back(emulator):
         with pytest.raises(RobotConnectionError, match="no link"):
             await bot.stop()
         await emulator.replug()
-        await until(lambda: bot.connected, timeout=15)
+        await until(lambda: bot.connected)
         streamed = len(emulator.setpoints)
         await until(lambda: _when(bot, lambda r: r["armed"]))
         assert all(s.vx == 0 for s in emulator.setpoints[streamed:]), "motion not resumed"
@@ -475,7 +475,7 @@ async def test_serial_link_on_a_pty_and_its_replug():
             error = await failing(bot.sensors)
             assert "no link to the mavlink vehicle" in str(error)
             await emu.replug()
-            await until(lambda: bot.connected, timeout=15)
+            await until(lambda: bot.connected)
             await bot.drive(0.1, 0.0)
             await until(lambda: emu.commanded() == pytest.approx((0.1, 0.0)))
     finally:
@@ -494,7 +494,7 @@ async def test_udp_to_a_vehicle_and_its_silence():
             error = await until(lambda: failing(bot.sensors))
             assert "no HEARTBEAT from the vehicle for 1 s" in str(error)
             await emu.replug()
-            await until(lambda: bot.connected, timeout=15)
+            await until(lambda: bot.connected)
             await bot.drive(0.1, 0.0)
             await until(lambda: emu.speed == pytest.approx(0.1))
     finally:

@@ -467,7 +467,7 @@ async def test_unplugged_link_is_a_clear_error_then_replug_reconnects(robot, emu
     assert emulator.commanded()[0] > 0, "an NXT has no watchdog: it drives on"
 
     await emulator.replug()
-    await until(lambda: robot.connected, timeout=5.0)
+    await until(lambda: robot.connected)
     assert emulator.commanded() == (0.0, 0.0), "reconnecting turns the motors off"
     assert emulator.resets == 2
     emulator.battery_mv = 7700

@@ -147,7 +147,7 @@ async def test_stop_sends_zero_velocities(robot, emulator):
 
 async def test_keepalive_arrives_while_idle(robot, emulator):
     emulator.commands.clear()
-    await until(lambda: len(emulator.named("PULSE")) >= 2, timeout=5.0)
+    await until(lambda: len(emulator.named("PULSE")) >= 2)
     assert emulator.names() == ["PULSE", "PULSE"]
     pulses = [c.at for c in emulator.named("PULSE")]
     assert pulses[1] - pulses[0] > 0.5, "about one a second, not a flood"
@@ -269,7 +269,7 @@ async def test_tcp_link_returns_and_the_driver_resyncs():
         second = ArcosEmulator(name="second")
         await second.start_tcp(port)
         try:
-            await until(lambda: bot.connected, timeout=5.0)
+            await until(lambda: bot.connected)
             assert second.names()[:5] == ["SYNC0", "SYNC1", "SYNC2", "OPEN", "ENABLE"]
             assert bot.identity["name"] == "second"
             assert second.vel == 0, "motion must not resume by itself after a reconnection"
