@@ -5,8 +5,14 @@ import threading
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
 
 from tests.appliance import Appliance
+
+# Hypothesis's 200 ms deadline for an example, and its health check of slow data generation,
+# are timings: on a busy machine (a load of 10-20 on two cores) they fail correct code.
+settings.register_profile("robotide", deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("robotide")
 
 # The `agent` fixture: a real Robot API server for tests of the API and its clients.
 pytest_plugins = ["tests.robot_api_server"]

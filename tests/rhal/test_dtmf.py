@@ -1,7 +1,6 @@
 """The dtmf:// driver, checked at the wire: its WAV (or device stream) is decoded back to digits
 by a Goertzel detector written here, independent of the driver's own tone code."""
 
-import asyncio
 import sys
 import threading
 import time
@@ -16,10 +15,20 @@ import rhal
 from rhal.dtmf import STATES, TABLES, DtmfRobot, motor_state
 from rhal.registry import DRIVERS
 from tests.rhal.dtmf_decoder import decode, read_wav
+from tests.waiting import until
 
 
 def digits_of(tones) -> list[str]:
     return [digit for digit, _, _ in tones]
+
+
+def played(wav_path, digit: str, times: int = 1) -> bool:
+    """``digit`` has played out whole ``times`` so far: the tones play in real time, so a
+    test waits for them, not for a guess of how long they take on a busy machine."""
+    if not wav_path.exists() or wav_path.stat().st_size <= 44:
+        return False
+    tones = decode(*read_wav(wav_path))
+    return [d for d, tone_ms, _ in tones if tone_ms >= 35].count(digit) >= times
 
 
 def runs(digits: list[str]) -> list[str]:
@@ -112,14 +121,14 @@ async def test_any_finite_drive_gives_a_state_and_its_digit(wav_path, linear, an
 
 async def test_a_drive_sequence_comes_out_as_its_digits(wav_path):
     async with DtmfRobot(wav=wav_path) as bot:
-        await asyncio.sleep(0.3)  # the stop tones sent on opening play out
+        await until(lambda: played(wav_path, "D", 3))  # the stop tones sent on opening
         await bot.drive(0.3, 0.0)
-        await asyncio.sleep(0.4)
+        await until(lambda: played(wav_path, "5"))
         await bot.drive(0.0, 1.5)
         readings = await bot.sensors()
         assert (readings["motor_state"], readings["digit"]) == ("spin_left", "6")
-        assert readings["time"] > 0.6
-        await asyncio.sleep(0.4)
+        assert readings["time"] > 0  # s since it opened
+        await until(lambda: played(wav_path, "6"))
         await bot.stop()
     digits = digits_of(decode(*read_wav(wav_path)))
     assert runs(digits) == ["D", "5", "6", "D"]
@@ -132,7 +141,7 @@ async def test_tone_and_gap_lengths_are_as_configured(dtmf, wav_path, rate, tone
     url = f"dtmf://?wav={wav_path}&sample_rate={rate}&tone_ms={tone_ms}&gap_ms={gap_ms}"
     async with rhal.connect(url) as bot:
         await bot.drive(-0.5, 0.0)
-        await asyncio.sleep(0.3)
+        await until(lambda: played(wav_path, "0"))
     samples, wav_rate = read_wav(wav_path)
     tones = decode(samples, wav_rate)
     assert wav_rate == rate
@@ -146,9 +155,7 @@ async def test_tone_and_gap_lengths_are_as_configured(dtmf, wav_path, rate, tone
 async def test_the_wav_is_readable_while_it_plays(wav_path):
     async with DtmfRobot(wav=wav_path) as bot:
         await bot.drive(0.0, -1.0)
-        await asyncio.sleep(0.5)
-        digits = digits_of(decode(*read_wav(wav_path)))
-        assert "9" in digits
+        await until(lambda: played(wav_path, "9"))
         assert bot.is_open
 
 
@@ -156,7 +163,7 @@ async def test_close_sends_stop_and_is_idempotent(wav_path):
     bot = DtmfRobot(wav=wav_path)
     await bot.open()
     await bot.drive(0.5, 2.0)
-    await asyncio.sleep(0.2)
+    await until(lambda: played(wav_path, "4"))
     await bot.close()
     await bot.close()
     await bot.stop()  # a closed robot is already stopped
@@ -170,7 +177,7 @@ async def test_a_custom_table_from_the_url(dtmf, wav_path):
     table = "forward:1,back:2,spin_left:3,spin_right:A,pivot_left:B,pivot_right:C,stop:*"
     async with rhal.connect(f"dtmf://?wav={wav_path}&table={table}") as bot:
         await bot.drive(0.0, -2.0)
-        await asyncio.sleep(0.2)
+        await until(lambda: played(wav_path, "A"))
         assert bot.capabilities()["dtmf"]["table"]["spin_right"] == "A"
     # A move made before the opening stop tone plays replaces it: the newest command wins.
     assert runs(digits_of(decode(*read_wav(wav_path)))) in (["*", "A", "*"], ["A", "*"])
@@ -273,10 +280,16 @@ def sounddevice(monkeypatch):
     return fake
 
 
+def digits_given(stream) -> list[str]:
+    with stream.lock:
+        samples = np.frombuffer(b"".join(stream.chunks), dtype="<i2")
+    return digits_of(decode(samples, stream.rate)) if samples.size else []
+
+
 async def test_a_device_plays_the_same_digits(sounddevice):
     async with DtmfRobot(device="hw:1,0") as bot:
         await bot.drive(0.5, -2.0)
-        await asyncio.sleep(0.3)
+        await until(lambda: "1" in digits_given(sounddevice.streams[0]))
     (stream,) = sounddevice.streams
     assert (stream.rate, stream.device, stream.stopped, stream.closed) == (
         44100,
@@ -295,13 +308,21 @@ async def test_a_device_that_dies_is_reported_to_the_next_call(sounddevice, monk
     bot = DtmfRobot(tone_ms=10, gap_ms=10)
     await bot.open()
     await bot.drive(0.5, 0.0)
-    await asyncio.sleep(0.2)
+    await until(lambda: output_lost(bot))  # its third block of tones fails
     with pytest.raises(rhal.RobotConnectionError, match="lost its audio output: .*unplugged"):
         await bot.drive(0.5, 0.0)
     with pytest.raises(rhal.RobotConnectionError, match="unplugged"):
         await bot.stop()  # an e-stop must learn that its stop could not be sent
     await bot.close()  # releasing a dead output still works
     assert sounddevice.streams[0].closed
+
+
+async def output_lost(bot) -> bool:
+    try:
+        await bot.sensors()
+    except rhal.RobotConnectionError:
+        return True
+    return False
 
 
 async def test_without_sounddevice_a_device_robot_names_the_package(monkeypatch):
