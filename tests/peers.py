@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from tests.rhal.dtmf_decoder import decode, read_wav
+from tests.waiting import DEADLINE
 
 #: Every driver kind, as the "one program, six robots" tests run them.
 KINDS = ("sim", "dtmf", "nxt", "pioneer", "mavlink", "can")
@@ -40,13 +41,13 @@ def peer_in_thread(kind: str, tmp_path: Path, **options: Any) -> Iterator[Any]:
     thread = threading.Thread(target=loop.run_forever, name=f"{kind} peer", daemon=True)
     thread.start()
     peer = asyncio.run_coroutine_threadsafe(start_peer(kind, tmp_path, **options), loop)
-    peer = peer.result(timeout=15)
+    peer = peer.result(timeout=DEADLINE)
     try:
         yield peer
     finally:
-        asyncio.run_coroutine_threadsafe(peer.stop(), loop).result(timeout=15)
+        asyncio.run_coroutine_threadsafe(peer.stop(), loop).result(timeout=DEADLINE)
         loop.call_soon_threadsafe(loop.stop)
-        thread.join(timeout=5)
+        thread.join(timeout=DEADLINE)
 
 
 async def start_peer(
