@@ -6,10 +6,11 @@ pressed it too since it was last resumed: staff and its owner only). Every press
 resume is recorded (``RobotStop``: who, when, through what, the runs it ended), also when
 the robot's agent could not be reached.
 
-The record comes first. A press and a resume of one robot are decided, recorded and sent to
-its agent one at a time, under a lock on the robot (``_one_at_a_time``): a press is in the
-records before its agent hears of it, so nobody may resume past a press still on its way, and
-the agent hears presses and resumes in the order they are recorded. A press's reply (the runs
+The record comes first. Presses and resumes of one robot are decided and recorded one at a
+time, under a lock on the robot (``_one_at_a_time``): a press is in the records (and sent)
+before its agent hears of it, so nobody may resume past a press still on its way. A resume is
+sent once committed, and the agent acts on it only while the record's last word is a resume,
+so a press recorded after it wins whichever message arrives first. A press's reply (the runs
 it ended) is waited for after the lock is let go, then added to its record.
 """
 
@@ -69,8 +70,9 @@ def may_resume(user, robot: Robot, pressed: RobotStop | None) -> bool:
 def resume(user, robot: Robot, via: str) -> int:
     """The robot may move again and its queue moves: how many runs were waiting, held.
     Decided under the lock presses take, so a press recorded (even one whose agent has not
-    answered yet) is seen; the agent is told before the lock goes, so a press recorded after
-    this resume reaches it after the resume."""
+    answered yet) is seen. The agent is told once the resume is committed: it resumes only
+    if the record's last word is a resume when it reads it (RobotAgent._press_last_recorded),
+    so a press recorded after this one keeps it stopped whichever message comes first."""
     with transaction.atomic():
         _one_at_a_time(robot)
         pressed = RobotStop.pressed(robot.pk)
@@ -81,8 +83,8 @@ def resume(user, robot: Robot, via: str) -> int:
         if pressed is not None:
             _record(robot, "resume", user, via)
         count = Run.queue_of(robot.pk).filter(reason=Run.HELD).count()
-        with contextlib.suppress(Exception):  # the agent away: back, it finds it resumed
-            tell_agent_sync(robot.name, "robot.resume")
+    with contextlib.suppress(Exception):  # the agent away: back, it finds it resumed
+        tell_agent_sync(robot.name, "robot.resume")
     run_queue.unhold(robot)  # the pages hear of it once the resume is committed
     return count
 
