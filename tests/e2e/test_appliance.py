@@ -186,7 +186,7 @@ def test_the_examples_run(any_appliance):
     assert {"Compass", "Drive a square", "Stop before the wall", "Hello from the shell"} <= set(
         programs
     )
-    run = app.wait_run(app.run_program(programs["Stop before the wall"]["id"])["id"], timeout=30)
+    run = app.wait_run(app.run_program(programs["Stop before the wall"]["id"])["id"])
     assert run["state"] == "finished", app.api("GET", f"/api/runs/{run['id']}/log").text
     log = app.api("GET", f"/api/runs/{run['id']}/log").text
     distance = float(re.search(r"Stopped (\d\.\d+) m before the wall", log).group(1))
@@ -275,7 +275,7 @@ def test_a_run_stopped_as_it_starts_never_runs_a_line(any_appliance):
     for _ in range(5):
         run_id = app.run_program(program["id"])["id"]
         app.api("POST", f"/api/runs/{run_id}/stop")
-        run = app.wait_run(run_id, timeout=15)
+        run = app.wait_run(run_id)
         log = app.api("GET", f"/api/runs/{run_id}/log").text
         assert run["state"] == "stopped", (run, log)
         if run["reason"] == "stopped by user before it started":

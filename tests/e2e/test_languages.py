@@ -84,7 +84,7 @@ def test_the_wall_and_turn_example(app, language):
 def test_an_rpc_error_is_a_clear_error(app, language, case):
     source = (ERRORS if case == "missing sensor" else UNKNOWN_METHOD)[language]
     program = app.create_program(f"error {case} {language}", source, language=language)
-    run = app.wait_run(app.run_program(program["id"])["id"], timeout=30)
+    run = app.wait_run(app.run_program(program["id"])["id"])
     stderr = app.api("GET", f"/api/runs/{run['id']}/log?stream=stderr").text
     assert run["state"] == "failed" and run["exit_code"] != 0, stderr
     expected = "gps" if case == "missing sensor" else "fly"

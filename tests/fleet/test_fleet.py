@@ -80,7 +80,7 @@ def test_a_web_worker_that_dies_is_replaced(fleet):
     before = workers_seen(app)
     victim = sorted(before)[0]
     os.kill(int(victim.rpartition(":")[2]), signal.SIGKILL)
-    wait(lambda: len(seen := workers_seen(app)) == 2 and victim not in seen, timeout=30,
+    wait(lambda: len(seen := workers_seen(app)) == 2 and victim not in seen,
          what="a new worker in place of the dead one")  # fmt: skip
 
 
@@ -165,13 +165,13 @@ def test_an_agent_killed_goes_offline_its_run_lost_then_it_serves_again(fleet):
     def robot(name):
         return next(r for r in app.api("GET", "/api/robots").json() if r["name"] == name)
 
-    wait(lambda: not robot("r3")["online"], timeout=20, what="r3 offline")
+    wait(lambda: not robot("r3")["online"], what="r3 offline")
     offline_after = time.monotonic() - killed_at
-    lost = app.wait_run(run["id"], states=("lost",), timeout=20)
+    lost = app.wait_run(run["id"], states=("lost",))
     assert "stopped answering" in lost["reason"]
     assert all(robot(name)["online"] for name in ROBOTS if name != "r3")
     runner.restart("agent-r3")
-    wait(lambda: robot("r3")["online"], timeout=30, what="r3 online again")
+    wait(lambda: robot("r3")["online"], what="r3 online again")
     again = app.run_program(app.create_program("again", "print('back')\n")["id"], robot="r3")
     assert app.wait_run(again["id"])["state"] == "finished"
     assert app.api("GET", f"/api/runs/{again['id']}/log").text.startswith("back\n")
@@ -200,6 +200,6 @@ def test_three_users_queue_for_one_robot(fleet):
     carol = run_as("carol", "print('carol drove')\n")
     wait(lambda: run(carol["id"], "carol")["queue_position"] == 2, what="carol second")
     app.api("POST", f"/api/runs/{alice['id']}/stop", token=tokens["alice"])
-    assert app.wait_run(bob["id"], timeout=30)["state"] == "finished"
-    assert app.wait_run(carol["id"], timeout=30)["state"] == "finished"
+    assert app.wait_run(bob["id"])["state"] == "finished"
+    assert app.wait_run(carol["id"])["state"] == "finished"
     assert run(alice["id"], "alice")["state"] == "stopped"

@@ -48,8 +48,16 @@ def teacher_of(student):
     return teacher
 
 
+class Communicator(WebsocketCommunicator):
+    """A message waited for up to 30 s, not channels' 1 s (which ran out on a busy machine):
+    only a message that never comes waits it out."""
+
+    async def receive_from(self, timeout=30):
+        return await super().receive_from(timeout)
+
+
 def communicator(consumer, path, user, **kwargs):
-    comm = WebsocketCommunicator(consumer.as_asgi(), path)
+    comm = Communicator(consumer.as_asgi(), path)
     comm.scope["user"] = user
     comm.scope["url_route"] = {"kwargs": kwargs}
     return comm
@@ -134,7 +142,7 @@ async def test_the_run_list_rerenders_for_its_user_only():
     await get_channel_layer().group_send(
         RUNS_GROUP, {"type": "runs.changed", "run_id": run.pk, "robot": "sim"}
     )
-    html = await comm.receive_from(timeout=3)
+    html = await comm.receive_from(timeout=30)
     assert 'id="run-tables"' in html and f"#{run.pk}" not in html
     await comm.disconnect()
 
@@ -144,7 +152,7 @@ async def test_robot_page_shows_svg_only_as_an_image():
     comm = communicator(RobotConsumer, "/ws/robots/sim/", alice, name="sim")
     assert (await comm.connect())[0]
     # First what runs there now: the page may have missed a change since it was rendered.
-    running = await comm.receive_from(timeout=3)
+    running = await comm.receive_from(timeout=30)
     assert 'id="robot-running"' in running and 'p</a> <span class="state starting">' in running
     svg = '<svg xmlns="http://www.w3.org/2000/svg"><script>alert(1)</script></svg>'
     event = {
@@ -155,7 +163,7 @@ async def test_robot_page_shows_svg_only_as_an_image():
         "shows": {"compass": {"value": svg, "run": 1}, "note": {"value": "<b>hi</b>", "run": 1}},
     }
     await get_channel_layer().group_send("robot-sim", event)
-    html = await comm.receive_from(timeout=3)
+    html = await comm.receive_from(timeout=30)
     assert "<th>heading</th><td>12.5</td>" in html and "position.x" in html
     assert "<script>" not in html and 'src="data:image/svg+xml;base64,' in html
     assert "&lt;b&gt;hi&lt;/b&gt;" in html
@@ -231,7 +239,7 @@ async def test_the_run_list_keeps_what_staff_see_and_where_stop_returns():
     await get_channel_layer().group_send(
         RUNS_GROUP, {"type": "runs.changed", "run_id": run.pk, "robot": "sim"}
     )
-    html = await comm.receive_from(timeout=3)
+    html = await comm.receive_from(timeout=30)
     assert "<th>User</th>" in html and f"#{run.pk}" in html
     assert 'name="next" value="/runs/?robot=sim"' in html
     await comm.disconnect()
@@ -414,7 +422,7 @@ async def test_a_pass_opens_the_log_while_the_database_thread_is_busy():
     async with database_thread_busy():
         connected, _ = await comm.connect(timeout=5)
         assert connected
-        assert await comm.receive_from(timeout=5) == (
+        assert await comm.receive_from(timeout=30) == (
             '<div id="log-lines"><div class="ln o">first</div></div>'
         )
     assert 'id="run-status"' in await comm.receive_from()  # then its state
