@@ -199,7 +199,8 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
         return self.status_html()
 
     def status_html(self) -> str:
-        return render_to_string("runs/_status.html", {"run": self.run, "oob": True})
+        context = {"run": self.run, "oob": True, "user": self.scope["user"]}
+        return render_to_string("runs/_status.html", context)
 
     async def send_status(self):
         await self.send(await database_sync_to_async(self.status_html)())

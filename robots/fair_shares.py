@@ -17,6 +17,7 @@ third run. SQLite serialises such transactions anyway (IMMEDIATE).
 from __future__ import annotations
 
 import enum
+import re
 from dataclasses import dataclass
 
 from django.conf import settings
@@ -176,13 +177,36 @@ def _admitted(run: Run, queued: bool) -> Admission:
 
 
 def reason_shown(reason: str, mine: bool) -> str:
-    """A share wait's reason as someone other than the run's owner reads it (staff, the
-    robot's owner): it is said to the owner ("you already have...")."""
-    if mine or not reason.startswith(USER_WAIT):
-        return reason
-    return reason.replace(USER_WAIT, f"{WAITING}its owner already has", 1).replace(
-        "(your limit", "(their limit", 1
-    )
+    """A share wait's reason (stored in English, like the run's log) in the reader's language,
+    said to the run's owner (``mine``) or, for staff and the robot's owner, about them."""
+    if found := _USER_WAIT_STORED.fullmatch(reason):
+        count, limit = int(found[1]), int(found[2])
+        if mine:
+            words = ngettext(
+                "waiting: you already have %(count)s run going (your limit is %(limit)s)",
+                "waiting: you already have %(count)s runs going (your limit is %(limit)s)",
+                count,
+            )
+        else:
+            words = ngettext(
+                "waiting: its owner already has %(count)s run going (their limit is %(limit)s)",
+                "waiting: its owner already has %(count)s runs going (their limit is %(limit)s)",
+                count,
+            )
+        return words % {"count": count, "limit": limit}
+    if found := _ROBOT_FULL_STORED.fullmatch(reason):
+        limit = int(found[1])
+        return ngettext(
+            "waiting: the robot runs at most %(limit)s program at once",
+            "waiting: the robot runs at most %(limit)s programs at once",
+            limit,
+        ) % {"limit": limit}
+    return reason
+
+
+# What user_reason and robot_reason store, read back by reason_shown.
+_USER_WAIT_STORED = re.compile(re.escape(USER_WAIT) + r" (\d+) runs? going \(your limit is (\d+)\)")
+_ROBOT_FULL_STORED = re.compile(re.escape(ROBOT_FULL) + r"(\d+) programs? at once")
 
 
 def robots_to_look_again(run_id: int) -> list[str]:

@@ -7,6 +7,8 @@ from django.utils.safestring import mark_safe
 from django.utils.translation import gettext as _
 
 from programs import watch_pass
+from robots import fair_shares
+from runlogs.notes import pruned_text, quota_words
 
 register = template.Library()
 
@@ -24,6 +26,21 @@ def duration(value: timedelta | None) -> str:
         return f"{minutes} min {secs:02d} s"
     hours, minutes = divmod(minutes, 60)
     return f"{hours} h {minutes:02d} min"
+
+
+@register.filter
+def reason_for(run, user) -> str:
+    """A run's reason note as ``user`` reads it: a share wait said to its owner or about
+    them, and a share wait's or a log quota's words (stored in English) in their language."""
+    if fair_shares.is_share_wait(run.reason):
+        return fair_shares.reason_shown(run.reason, getattr(user, "pk", None) == run.owner_id)
+    return quota_words(run.reason_note)
+
+
+@register.filter
+def pruned_note(run) -> str:
+    """A pruned log's note on its run's page: the words its download's 410 says."""
+    return pruned_text(run)
 
 
 @register.filter
