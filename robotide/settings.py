@@ -483,6 +483,9 @@ RUN_DEFAULTS = {
     "disk_mb": env_int("ROBOTIDE_RUN_DISK_MB", 256),
     "log_size_mb": env_int("ROBOTIDE_RUN_LOG_SIZE_MB", 64),
     "cpu_percent": env_int("ROBOTIDE_RUN_CPU_PERCENT", 100),  # of one CPU, the run as a whole
+    # A program printing faster waits in its write (nothing lost): a flood costs the server
+    # at most this much reading, splitting and writing lines (runbox.supervisor).
+    "output_kb_per_second": env_int("ROBOTIDE_RUN_OUTPUT_KB_PER_SECOND", 256),
     "stop_grace_seconds": 3,
 }
 # -- Run logs (runlogs): a user's logs together, and everybody's, stay within these (bytes on

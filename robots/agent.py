@@ -624,6 +624,7 @@ class RobotAgent:
             env={"PATH": SYSTEM_PATH},  # the program's own comes with its run (Launch)
             cwd=settings.RUNS_DIR,
             max_log_bytes=kind.limits.log_size_mb * MB,
+            output_rate=kind.limits.output_kb_per_second * 1024,
             grace=kind.grace,
             watch=RunWatch(kind.limits, box),
             box=box,

@@ -33,6 +33,7 @@ class Limits:
     disk_mb: int = 256
     log_size_mb: int = 64
     cpu_percent: int = 100  # of one CPU, for the whole run (its cgroup); 0: no cap
+    output_kb_per_second: int = 256  # its output read at most so fast (supervisor); 0: no cap
 
     @classmethod
     def from_settings(cls, values: dict) -> "Limits":

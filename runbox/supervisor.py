@@ -5,6 +5,11 @@ from (``o`` stdout, ``e`` stderr, ``s`` robotide itself), and handed in batches 
 for the live stream. The log file is the truth: the live batches are a bounded view of it and
 may skip lines when a program floods (the batch says how many), the file never does until the
 log size cap, which ends the program with a message saying so.
+
+A run's output is read no faster than its ``output_rate`` (bytes a second, after a burst):
+past it the pipes are not read for a while, so the program waits in its write and nothing is
+lost. Reading, splitting and writing a flood's lines is the server's (or agent's) own work, on
+its event loop: unbounded, two floods of one student took a fifth of a core from everyone.
 """
 
 import asyncio
@@ -25,6 +30,7 @@ MAX_LINE = 64 * 1024  # a longer line without a newline is cut into pieces of th
 # A live batch carries at most this much; the rest is counted as skipped (the log has it all).
 LIVE_MAX_BYTES = 128 * 1024
 LIVE_MAX_LINES = 1000
+OUTPUT_BURST = 2 * 1024 * 1024  # read at once before a run's output rate holds it back
 
 # (offset of the line in the log file, tag "o"|"e"|"s", text)
 LiveLine = tuple[int, str, str]
@@ -68,12 +74,15 @@ class RunProcess:
         batch_interval: float = 0.1,
         watch: RunWatch | None = None,
         box=None,
+        output_rate: int = 0,
+        output_burst: int = OUTPUT_BURST,
     ):
         """`box`: the run's box (runbox.box.Box), whose command `argv` is: prepared before
         the run is known, given its program by begin(), signalled as a whole, reporting the
         program's death by signal N as 128 + N. `log_path` and `on_output` may come with
         begin(); what the process says before then waits for the log. `watch`: what it
-        samples."""
+        samples. `output_rate`: bytes a second its output is read at most, after
+        `output_burst` (0: as fast as it comes)."""
         self.argv, self.env, self.cwd, self.log_path = argv, env, cwd, log_path
         self.watch, self.box = watch, box
         self.wrapped = box is not None
@@ -102,6 +111,9 @@ class RunProcess:
         self._stop_reason: str | None = None
         self._stop_state = "stopped"
         self._done: asyncio.Future | None = None
+        self._bucket = OutputBucket(output_rate, output_burst) if output_rate > 0 else None
+        self._reading_held: set[str] = set()  # why the pipes are not read now (none: read)
+        self._refill_handle: asyncio.TimerHandle | None = None
 
     async def start(self, gate=None, launch=None) -> int:
         """Spawn and begin at once (see both)."""
@@ -234,6 +246,8 @@ class RunProcess:
     # -- output ---------------------------------------------------------------------------
 
     def _feed(self, fd: int, data: bytes) -> None:
+        if self._bucket is not None:
+            self._meter(len(data))
         if fd == 2 and self.watch is not None:
             self.watch.saw_stderr(data)
         buffer = self._partial[fd] + data
@@ -246,6 +260,31 @@ class RunProcess:
         if lines:
             self._append(TAG_OF_FD[fd], lines)
             self._schedule_flush()
+
+    def _meter(self, size: int) -> None:
+        wait = self._bucket.take(size, time.monotonic())
+        if wait > 0 and self._refill_handle is None:
+            self._hold_reading("rate", True)
+            loop = asyncio.get_running_loop()
+            self._refill_handle = loop.call_later(wait, self._refilled)
+
+    def _refilled(self) -> None:
+        self._refill_handle = None
+        self._hold_reading("rate", False)
+
+    def _hold_reading(self, why: str, held: bool) -> None:
+        """Stop reading the program's pipes for `why` (the output rate, a log quota's grant
+        asked) or let go of it; they are read while nothing holds them."""
+        (self._reading_held.add if held else self._reading_held.discard)(why)
+        transport = getattr(self, "_transport", None)
+        for fd in (1, 2):
+            pipe = transport.get_pipe_transport(fd) if transport is not None else None
+            if pipe is None:
+                continue
+            if self._reading_held:
+                pipe.pause_reading()
+            else:
+                pipe.resume_reading()
 
     def _end_of_stream(self, fd: int) -> None:
         if self._partial.get(fd):
@@ -339,6 +378,13 @@ class RunProcess:
         self.returncode = self._transport.get_returncode()
         # Whatever the program left behind in its group ends with it, so its pipes close too.
         self._signal_group(signal.SIGKILL)
+        self._unmetered()  # what is left in its pipes is theirs at most: read to the end
+
+    def _unmetered(self) -> None:
+        self._bucket = None
+        if self._refill_handle is not None:
+            self._refill_handle.cancel()
+            self._refilled()
 
     def _finished(self) -> None:
         if self._kill_handle is not None:
@@ -358,6 +404,20 @@ class RunProcess:
             self._log.close()
         self._transport.close()
         self._done.set_result(None)
+
+
+class OutputBucket:
+    """A token bucket of bytes: `rate` a second, up to `burst` saved."""
+
+    def __init__(self, rate: int, burst: int):
+        self.rate, self.burst = rate, burst
+        self.tokens, self.at = float(burst), time.monotonic()
+
+    def take(self, size: int, now: float) -> float:
+        """Take `size` bytes' worth; the seconds until the bucket is out of debt (0: none)."""
+        self.tokens = min(self.burst, self.tokens + (now - self.at) * self.rate) - size
+        self.at = now
+        return -self.tokens / self.rate if self.tokens < 0 else 0.0
 
 
 def _cut(line: bytes) -> list[bytes]:

@@ -74,7 +74,7 @@ class QuotaRunProcess(RunProcess):
         if self._refused:
             return self._quota_reached()
         self._held.append((tag, lines, force))
-        self._pause_reading(True)
+        self._hold_reading("quota", True)
         self._ask(size)
 
     def _ask(self, need: int) -> None:
@@ -105,7 +105,7 @@ class QuotaRunProcess(RunProcess):
             return
         if self._log is not None and not self._log.closed:
             self._schedule_flush()
-        self._pause_reading(False)
+        self._hold_reading("quota", False)
         if self._finish_when_granted:
             self._finished()
 
@@ -114,15 +114,6 @@ class QuotaRunProcess(RunProcess):
         reason = f"{self._refused}; further output was discarded"
         self.system_line(reason)
         self.stop(reason, state="failed")
-
-    def _pause_reading(self, pause: bool) -> None:
-        transport = getattr(self, "_transport", None)
-        for fd in (1, 2):
-            pipe = transport.get_pipe_transport(fd) if transport is not None else None
-            if pipe is not None and pause:
-                pipe.pause_reading()
-            elif pipe is not None:
-                pipe.resume_reading()
 
     # -- its end --------------------------------------------------------------------------
 

@@ -13,6 +13,7 @@ from programs.languages import LANGUAGES
 from programs.runlog import tail
 from runbox import launcher
 from runbox.supervisor import RunProcess
+from tests.waiting import DEADLINE, until
 
 PYTHON = LANGUAGES["python"]
 SHELL = LANGUAGES["shell"]
@@ -129,6 +130,40 @@ async def test_a_flood_is_stored_whole_and_streamed_in_bounded_batches(tmp_path)
     for skipped_from, first, skipped in collector.gaps:  # each gap is where the batch says
         assert data[skipped_from:first].count(b"\n") == skipped
     assert collector.batches < 500  # batched, not one message per line
+
+
+async def test_a_flood_is_read_no_faster_than_its_output_rate(tmp_path):
+    """Past its burst, a flood's output is left in the pipe: the program waits in its write
+    (the server spends nothing on it meanwhile), and what it wrote is all kept."""
+    burst, block = 256 * 1024, 64 * 1024
+    flood = f"import sys\nfor _ in range(128): sys.stdout.write('x' * {block - 1} + '\\n')\n"
+    flood += "open('done', 'w').close()\n"
+    process, _ = await run(tmp_path, flood, output_rate=1024, output_burst=burst)
+    log = tmp_path / "output.log"
+
+    def blocked_in_its_write() -> bool:
+        assert process.running, "the flood ended: nothing held it back"
+        return "pipe_write" in Path(f"/proc/{process.pid}/wchan").read_text()
+
+    await until(lambda: log.exists() and log.stat().st_size >= burst and blocked_in_its_write())
+    await asyncio.sleep(0)
+    assert log.stat().st_size <= burst + 2 * block  # the burst, and what one read took with it
+    assert not (tmp_path / "done").exists()
+    process.kill("stopped by the test")
+    outcome = await asyncio.wait_for(process.wait(), DEADLINE)
+    assert outcome.state == "stopped"
+    assert all(text == "x" * (block - 1) for tag, text in log_lines(tmp_path) if tag == "o")
+
+
+async def test_output_within_its_rate_is_read_as_it_comes(tmp_path):
+    """A rate held back nothing within its burst: a program's lines all come, in order."""
+    process, collector = await run(
+        tmp_path, "for i in range(1000): print(i)\n", output_rate=1024, output_burst=64 * 1024
+    )
+    outcome = await asyncio.wait_for(process.wait(), DEADLINE)
+    assert outcome.state == "finished"
+    numbers = [text for tag, text in log_lines(tmp_path) if tag == "o"]
+    assert numbers == [str(i) for i in range(1000)]
 
 
 async def test_the_log_size_cap_ends_the_program_and_says_so(tmp_path):
