@@ -5,6 +5,7 @@ import threading
 from pathlib import Path
 
 import pytest
+from django.utils import translation
 from hypothesis import HealthCheck, settings
 
 from tests.appliance import Appliance
@@ -30,6 +31,10 @@ def _test_settings(settings, tmp_path):
     # Fair shares (robots.fair_shares) off for tests of other things, which run a user's
     # programs side by side as they please; tests of the shares set their own limits.
     settings.RUNS_PER_USER = settings.RUNS_PER_STAFF = 0
+    yield
+    # A page asked in Portuguese leaves the language active in this thread's context, which
+    # the next async test's tasks copy (an in-process agent's run reasons then said in pt-BR).
+    translation.deactivate()
 
 
 @pytest.fixture
