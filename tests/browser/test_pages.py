@@ -65,6 +65,8 @@ def _no_runs_left(appliance):
 
 
 def editor_text(page: Page) -> str:
+    # A page just shown (its heading) may not have made its editor yet on a busy machine.
+    page.wait_for_function("window.robotideEditor !== undefined")
     return page.evaluate("window.robotideEditor.getValue()")
 
 
