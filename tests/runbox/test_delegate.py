@@ -1,8 +1,9 @@
 """runbox.delegate: a robotide that is not root asks the user's systemd for a cgroup of its own.
 
 Here (a container: no systemd, no user manager) an ordinary user's robotide is given none and
-stays where it is, its runs bounded per process (tests/runbox/test_rootless_bounds.py); where
-the user's systemd answers, the command it gets runs in a scope whose cgroup it may write.
+stays where it is, its runs bounded per process (tests/runbox/test_rootless_bounds.py). The
+path where the user's systemd answers is not tested: no machine this suite runs on has one,
+and a test that can only be skipped here would be skipped in CI.
 """
 
 import json
@@ -50,17 +51,3 @@ def test_root_and_a_user_without_a_user_manager_stay_where_they_are(readable_cop
     assert said["command"] is None and not said["cgroups"], said
     assert said["why"].startswith("robotide is not root and cannot write to"), said
     assert delegated_command({DELEGATED: "1"}) is None  # in its scope: never again
-
-
-@pytest.mark.skipif(
-    os.geteuid() == 0 or not user_manager_answers(),
-    reason="needs an ordinary user whose systemd user manager runs (a desktop session)",
-)
-def test_where_the_users_systemd_answers_the_command_gets_a_cgroup_it_may_write():
-    command = delegated_command({})
-    assert command is not None and command[:3] == [command[0], "--user", "--scope"]
-    scope = command[: command.index("--") + 1]
-    inside = [*scope, "/usr/bin/python3", "-c", ASK.format(code=str(ROOT))]
-    done = subprocess.run(inside, capture_output=True, text=True, timeout=60,
-                          env={**os.environ, DELEGATED: "1"})  # fmt: skip
-    assert json.loads(done.stdout)["cgroups"], done.stdout + done.stderr
