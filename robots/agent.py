@@ -520,6 +520,8 @@ class RobotAgent:
         if run_id in self.cancelled or (active and active.process.stop_requested):
             self.cancelled.discard(run_id)
             return "stopped", "stopped by user before it started"
+        if self.lease.estopped:  # pressed while its start was decided (its share's admission)
+            return "stopped", "emergency stop"
         return None
 
     async def _launch(self, run_id: int, message: dict, claimed=None, gate=None) -> ActiveRun:

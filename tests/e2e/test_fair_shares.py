@@ -19,7 +19,7 @@ from programs.models import Run
 from robots import fair_shares, run_queue
 from robots.bus import ask_agent
 from robots.models import Robot
-from tests.e2e.agents import run_program, until
+from tests.e2e.agents import DEADLINE, run_program, until
 from tests.e2e.test_run_queue import api, fresh, in_state
 
 pytestmark = pytest.mark.django_db(transaction=True)
@@ -204,3 +204,28 @@ async def until_reason(run: Run, reason: str) -> None:
     while not await said():
         assert asyncio.get_running_loop().time() < deadline, f"run {run.pk}: {run.reason!r}"
         await asyncio.sleep(0.05)
+
+
+async def test_an_emergency_stop_pressed_while_a_start_is_admitted_keeps_it_from_running(
+    robot_on, limits, monkeypatch
+):
+    """The share's admission is a database trip between the queue's look and the launch: an
+    e-stop that lands meanwhile must still keep the program from running."""
+    limits.RUNS_PER_USER = 2
+    peer, agent, robot, alice = await robot_on("sim")
+    asked, let_go = asyncio.Event(), asyncio.Event()
+    admit, loop = fair_shares.admit, asyncio.get_running_loop()
+
+    def held_admit(run_id, box_cap=None):
+        loop.call_soon_threadsafe(asked.set)
+        asyncio.run_coroutine_threadsafe(let_go.wait(), loop).result(DEADLINE)
+        return admit(run_id, box_cap)
+
+    monkeypatch.setattr(fair_shares, "admit", held_admit)
+    run = await run_program(alice, robot, HOLDS)
+    await asyncio.wait_for(asked.wait(), DEADLINE)
+    assert agent.lease.estopped is False
+    await ask_agent("sim", "robot.estop")
+    let_go.set()
+    await in_state(run, "stopped")
+    assert (await fresh(run)).reason == "emergency stop"
