@@ -14,15 +14,26 @@ then gets its cgroup, and all runs their parent (runbox.share).
 """
 
 import os
+import pwd
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 from runbox import SYSTEM_PATH
 from runbox.cgroups import detect
 
 DELEGATED = "ROBOTIDE_DELEGATED"  # set in the scope: never a scope within a scope
 PROBE_TIMEOUT = 10.0
+
+
+def outlives_the_session(env) -> bool:
+    """A scope of the user's systemd ends with their last session unless they linger: a
+    `make run` left running over ssh would die at logout. Moved there only then, or when
+    asked (ROBOTIDE_DELEGATE=1)."""
+    if env.get("ROBOTIDE_DELEGATE") == "1":
+        return True
+    return Path("/var/lib/systemd/linger", pwd.getpwuid(os.geteuid()).pw_name).exists()
 
 
 def delegated_command(env: dict | None = None) -> list[str] | None:
@@ -32,7 +43,7 @@ def delegated_command(env: dict | None = None) -> list[str] | None:
     if os.geteuid() == 0 or env.get(DELEGATED) or detect().available:
         return None
     systemd_run = shutil.which("systemd-run", path=SYSTEM_PATH)
-    if systemd_run is None:
+    if systemd_run is None or not outlives_the_session(env):
         return None
     scope = [systemd_run, "--user", "--scope", "--quiet", "-p", "Delegate=yes", "--"]
     try:  # without a user manager (no session, a container) it says so at once
