@@ -179,6 +179,7 @@ class RobotAgent:
         # given a box lately (run id -> loop time).
         self._taking: set[int] = set()
         self._boxed: dict[int, float] = {}
+        self._last_press = 0  # the record (RobotStop id) of the last press heard
 
     # -- life cycle -----------------------------------------------------------------------
 
@@ -199,6 +200,7 @@ class RobotAgent:
         pressed = await database_sync_to_async(RobotStop.pressed)(robot.pk)
         if pressed is not None:  # pressed while this agent was away: still in force
             self.lease.estop(pressed.username)
+            self._last_press = pressed.pk
             self.queue.held = True
         lost = await database_sync_to_async(Run.mark_lost)(self.name)
         for run_id in lost:
@@ -396,10 +398,11 @@ class RobotAgent:
                 self.cancelled.add(message["run_id"])
                 self.queue.cancel(message["run_id"])  # if it waits in line
         elif kind == "robot.estop":
+            self._last_press = max(self._last_press, message.get("record") or 0)
             ended = await self.estop(message.get("by", ""))
             await self.reply(message, {"stopped": len(ended), "runs": ended})
         elif kind == "robot.resume":
-            resumed = not await self._press_last_recorded() and await self.resume()
+            resumed = self.resume_from(message.get("after")) and await self.resume()
             await self.reply(message, {"resumed": resumed})
         elif kind == "robot.sensors":
             await self.reply(message, {"sensors": await self.driver.sensors()})
@@ -720,13 +723,11 @@ class RobotAgent:
         active.process.kill(reason)
         return active.run_id
 
-    async def _press_last_recorded(self) -> bool:
-        """Whether the record's last word is a press (robots.stops records before it sends):
-        a resume that reaches the agent after it is stale. Redis orders a channel's messages
-        by each sender's clock, so a press sent after a resume may come first."""
-        stops = RobotStop.objects.filter(robot__name=self.name)
-        last = await database_sync_to_async(stops.first)()
-        return last is not None and last.kind == "estop"
+    def resume_from(self, after: int | None) -> bool:
+        """Whether a resume that follows record `after` (robots.stops) is in time: not older
+        than the last press heard. Redis orders a channel's messages by each sender's clock,
+        so a press sent after a resume may come first."""
+        return after is None or after > self._last_press
 
     async def resume(self) -> bool:
         """After an emergency stop: the robot may move again, and its queue moves."""

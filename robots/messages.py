@@ -125,8 +125,8 @@ SCHEMAS: dict[str, dict[str, tuple[Callable, bool]]] = {
         "user": (_text(), OPTIONAL),
     },
     "run.stop": {"run_id": (_run_id, REQUIRED)},
-    "robot.estop": {"by": (_text(), OPTIONAL)},
-    "robot.resume": {},
+    "robot.estop": {"by": (_text(), OPTIONAL), "record": (_run_id, OPTIONAL)},
+    "robot.resume": {"after": (_run_id, OPTIONAL)},
     "robot.sensors": {},
     "robot.state": {},
     "robot.teleop": {

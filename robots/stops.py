@@ -8,10 +8,11 @@ the robot's agent could not be reached.
 
 The record comes first. Presses and resumes of one robot are decided and recorded one at a
 time, under a lock on the robot (``_one_at_a_time``): a press is in the records (and sent)
-before its agent hears of it, so nobody may resume past a press still on its way. A resume is
-sent once committed, and the agent acts on it only while the record's last word is a resume,
-so a press recorded after it wins whichever message arrives first. A press's reply (the runs
-it ended) is waited for after the lock is let go, then added to its record.
+before its agent hears of it, so nobody may resume past a press still on its way. Messages
+carry their record's id (ids grow in the records' order); the agent ignores a resume older
+than the last press it heard, so a press recorded after it wins whichever message arrives
+first. A press's reply (the runs it ended) is waited for after the lock is let go, then added
+to its record.
 """
 
 import contextlib
@@ -37,7 +38,9 @@ def press(user, robot: Robot, via: str) -> RobotStop:
         _one_at_a_time(robot)
         record = _record(robot, "estop", user, via)
         try:
-            reply_to = request_agent_sync(robot.name, "robot.estop", by=user.get_username())
+            reply_to = request_agent_sync(
+                robot.name, "robot.estop", by=user.get_username(), record=record.pk
+            )
         except Exception as exc:  # the channel layer away: the press stands, recorded
             unsent = AgentUnavailable(str(exc))
         else:
@@ -70,8 +73,8 @@ def may_resume(user, robot: Robot, pressed: RobotStop | None) -> bool:
 def resume(user, robot: Robot, via: str) -> int:
     """The robot may move again and its queue moves: how many runs were waiting, held.
     Decided under the lock presses take, so a press recorded (even one whose agent has not
-    answered yet) is seen. The agent is told once the resume is committed: it resumes only
-    if the record's last word is a resume when it reads it (RobotAgent._press_last_recorded),
+    answered yet) is seen. The agent is told once the resume is committed, with the record it
+    follows: it ignores a resume older than the last press it heard (RobotAgent.resume_from),
     so a press recorded after this one keeps it stopped whichever message comes first."""
     with transaction.atomic():
         _one_at_a_time(robot)
@@ -80,11 +83,11 @@ def resume(user, robot: Robot, via: str) -> int:
             raise PermissionDenied(
                 _("Only staff, the robot's owner or whoever pressed its emergency stop resume it.")
             )
-        if pressed is not None:
-            _record(robot, "resume", user, via)
+        last = _record(robot, "resume", user, via) if pressed is not None else _last(robot)
         count = Run.queue_of(robot.pk).filter(reason=Run.HELD).count()
+    after = {"after": last.pk} if last is not None else {}
     with contextlib.suppress(Exception):  # the agent away: back, it finds it resumed
-        tell_agent_sync(robot.name, "robot.resume")
+        tell_agent_sync(robot.name, "robot.resume", **after)
     run_queue.unhold(robot)  # the pages hear of it once the resume is committed
     return count
 
@@ -98,6 +101,10 @@ def _one_at_a_time(robot: Robot) -> None:
     PostgreSQL: the robot's row locked. SQLite: transactions begin IMMEDIATE (robotide.settings),
     taking the database's write lock, and select_for_update is a no-op there."""
     list(Robot.objects.select_for_update().filter(pk=robot.pk).values_list("pk", flat=True))
+
+
+def _last(robot: Robot) -> RobotStop | None:
+    return RobotStop.objects.filter(robot=robot).order_by("-pk").first()
 
 
 def _record(robot, kind: str, user, via: str) -> RobotStop:

@@ -147,18 +147,21 @@ async def test_a_press_recorded_before_its_reply_shows_on_the_record_at_once(
 
 
 @database_sync_to_async
-def recorded(robot, events) -> None:
-    for kind, user in events:
-        RobotStop.objects.create(
-            robot=robot, kind=kind, user=user, username=user.username, via="the API"
-        )
+def recorded(robot, events) -> list[RobotStop]:
+    return [
+        RobotStop.objects.create(robot=robot, kind=kind, user=user, username=user.username,
+                                 via="the API")
+        for kind, user in events
+    ]  # fmt: skip
 
 
 async def test_a_resume_reaching_the_agent_after_a_press_recorded_later_is_stale(sim_agent):
     """Redis orders a channel's messages by each sender's clock: a press recorded (and sent)
-    after a resume may still reach the agent first. The record's last word decides."""
+    after a resume may still reach the agent first. The records' ids decide."""
     robot, teacher, student = await lab()
-    await recorded(robot, [("estop", student), ("resume", student), ("estop", teacher)])
-    await send_to_agent("sim", "robot.estop", by=TEACHER)  # the teacher's press, first
-    await send_to_agent("sim", "robot.resume")  # the student's resume, late
+    _, resumed, pressed = await recorded(
+        robot, [("estop", student), ("resume", student), ("estop", teacher)]
+    )
+    await send_to_agent("sim", "robot.estop", by=TEACHER, record=pressed.pk)  # first
+    await send_to_agent("sim", "robot.resume", after=resumed.pk)  # the student's, late
     assert await robot_stopped_for_its_agent(sim_agent)
