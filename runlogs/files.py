@@ -11,6 +11,7 @@ import gzip
 import os
 import shutil
 import struct
+import tempfile
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,8 +34,8 @@ def gzipped(path: Path) -> Path:
     return path.with_name(path.name + ".gz")
 
 
-def _part(path: Path) -> Path:
-    return path.with_name(path.name + ".gz.part")
+def _parts(path: Path) -> list[Path]:
+    return list(path.parent.glob(f"{path.name}.*.gz.part"))
 
 
 @dataclass
@@ -118,17 +119,22 @@ def compress_aside(path: Path) -> Path | None:
     """The plain log gzipped into a part file beside it (the plain one left as it is); None if
     there is no plain log; DoesNotCompress if its start barely shrinks. Slow for a big log:
     run it in a worker thread."""
-    part = _part(path)
     try:
         source = open(path, "rb")  # noqa: SIM115
     except FileNotFoundError:
         return None
+    # A part of its own: two compressions of one log (its run's timer, another agent's sweep
+    # of leftovers) must not write into one file; each is whole, and either may be put.
+    handle, name = tempfile.mkstemp(dir=path.parent, prefix=f"{path.name}.", suffix=".gz.part")
+    part = Path(name)
     sample = source.read(COPY_CHUNK)
     if len(sample) > 4096 and len(zlib.compress(sample, LEVEL)) > WORTH_IT * len(sample):
         source.close()
+        os.close(handle)
+        part.unlink()
         raise DoesNotCompress(path)
     source.seek(0)
-    with source, open(part, "wb") as raw:
+    with source, open(handle, "wb") as raw:
         with gzip.GzipFile(filename="", mode="wb", fileobj=raw, compresslevel=LEVEL, mtime=0) as gz:
             shutil.copyfileobj(source, gz, COPY_CHUNK)
         raw.flush()
@@ -153,7 +159,7 @@ def remove_plain(path: Path) -> None:
 
 def remove(path: Path) -> None:
     """The log gone, plain, compressed or half compressed."""
-    for each in (path, gzipped(path), _part(path)):
+    for each in (path, gzipped(path), *_parts(path)):
         try:
             each.unlink()
         except FileNotFoundError:

@@ -3,6 +3,8 @@ tail, the websocket's catch-up and skipped count, the download) gives the same a
 log and for its gzip, and a reader that opened a log before it was compressed or pruned reads
 it to its end."""
 
+import gzip
+
 import pytest
 
 from programs import runlog
@@ -91,3 +93,17 @@ def test_no_log_reads_as_nothing(tmp_path):
     assert runlog.lines_after(path, 0) == ([], 0) and runlog.lines_after(path, 5) == (None, 5)
     assert runlog.count_lines_between(path, 0, 10) == 0
     assert b"".join(runlog.plain_text(path)) == b"" and not runlog.log_exists(path)
+
+
+def test_two_compressions_of_one_log_write_parts_of_their_own(tmp_path):
+    """Its run's timer and another agent's sweep may compress one log at once: each writes a
+    whole part of its own (one shared name let each truncate the other's)."""
+    path = tmp_path / "output.log"
+    path.write_bytes(b"".join(b"o line %d\n" % i for i in range(50_000)))
+    first, second = files.compress_aside(path), files.compress_aside(path)
+    assert first != second
+    for part in (first, second):
+        assert gzip.decompress(part.read_bytes()) == path.read_bytes()
+    files.put_in_place(path, second)
+    files.remove(path)
+    assert list(tmp_path.iterdir()) == []  # its other part goes with the log
