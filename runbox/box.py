@@ -257,6 +257,10 @@ class Box:
                 pass_fds=(ready_w,), stdin=asyncio.subprocess.DEVNULL,
                 stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL,
             )  # fmt: skip
+            # The run's traffic grows it: the OOM killer's choice with the run, not the
+            # agent's -500 it inherited (raising one's child's score needs no privilege).
+            with contextlib.suppress(OSError):
+                oom.first_to_go_now(self.nat.pid)
             os.close(ready_w)
             ready_w = None
             reading = asyncio.to_thread(os.read, ready_r, 1)
