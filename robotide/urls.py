@@ -8,7 +8,7 @@ from django.views.i18n import JavaScriptCatalog
 
 from programs import api_help, workbench
 from programs import views as programs
-from robotide import language, oidc, views_health
+from robotide import language, oidc, views_health, views_icon
 from robotide import views_account as account
 from robotide.api import api
 from robotide.security import LoginForm
@@ -20,6 +20,8 @@ STARTED = timezone.now().replace(microsecond=0)  # the script catalog is as old 
 urlpatterns = [
     path("", RedirectView.as_view(pattern_name="program-list"), name="home"),
     path("healthz", views_health.healthz, name="healthz"),
+    # Pages name their icon; what asks for the old default (the admin, API docs, feeds) gets it.
+    path("favicon.ico", views_icon.favicon, name="favicon"),
     path("programs/", programs.program_list, name="program-list"),
     path("programs/new", programs.program_create, name="program-create"),
     path("programs/upload", programs.program_upload, name="program-upload"),

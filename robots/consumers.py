@@ -7,6 +7,7 @@ import time
 from asgiref.sync import sync_to_async
 from channels.db import database_sync_to_async
 from channels.generic.websocket import AsyncWebsocketConsumer
+from django.conf import settings
 from django.http import Http404
 from django.template.loader import render_to_string
 from django.utils.translation import gettext as _
@@ -14,9 +15,11 @@ from django.utils.translation import gettext as _
 from programs.access import ACCESS_STANDS_SECONDS, runs_for_user
 from programs.models import Run
 from robotide.consumers import DirectDispatch
+from robots import stops
 from robots.bus import send_to_agent
 from robots.models import get_robot_for_user, robot_group
 from robots.readings import sensor_rows, show_items, status
+from robots.say import SayOnSocket, parse_say
 
 
 def parse_control(text: str | None) -> tuple[str, tuple[float, float] | None] | None:
@@ -57,7 +60,7 @@ def _access(user, name):
     return robot, robot.drivable_by(user)
 
 
-class RobotConsumer(DirectDispatch, AsyncWebsocketConsumer):
+class RobotConsumer(SayOnSocket, DirectDispatch, AsyncWebsocketConsumer):
     async def connect(self):
         name = self.scope["url_route"]["kwargs"]["name"]
         self.robot, self.may_drive = await _access(self.scope["user"], name)
@@ -66,12 +69,17 @@ class RobotConsumer(DirectDispatch, AsyncWebsocketConsumer):
             return
         self.shows: dict[str, dict] = {}
         self.drove = False
+        # The workbench's robot panel (?panel=1) shows no list of runs: it is sent none, so
+        # its queue's refresh (relative to the robot page's URL) never reaches a page without it.
+        self.panel = b"panel=1" in self.scope.get("query_string", b"").split(b"&")
         self.checked = time.monotonic()
         self.group = robot_group(self.robot.name)
         await self.channel_layer.group_add(self.group, self.channel_name)
         await self.accept()
-        # What ran or ended between the page's render and this connection.
+        # What ran or ended between the page's render and this connection; the stop in force
+        # (the workbench's panel is rendered without it).
         await self.robot_runs({})
+        await self.robot_stop({})
 
     async def disconnect(self, code):
         if getattr(self, "group", None):
@@ -82,7 +90,11 @@ class RobotConsumer(DirectDispatch, AsyncWebsocketConsumer):
     async def receive(self, text_data=None, bytes_data=None):
         """Driving by hand: ``{"drive": [linear, angular]}`` repeated while held,
         ``{"stop": true}`` when let go, ``{"release": true}`` to give up control,
-        ``{"take": true}`` for staff to take control over."""
+        ``{"take": true}`` for staff to take control over; ``{"say": text}`` from the "Say
+        to the robot" box (robots.say)."""
+        if (said := parse_say(text_data)) is not None:
+            await self.say_typed(said)
+            return
         command = parse_control(text_data)
         if command is None or not await self.still_allowed():
             return
@@ -167,7 +179,21 @@ class RobotConsumer(DirectDispatch, AsyncWebsocketConsumer):
             html += render_to_string("robots/_shows.html", context)
         return html
 
+    async def robot_stop(self, event):
+        """An emergency stop pressed or resumed (robots.stops): the banner shows it, and a
+        Resume for whoever may."""
+        context = await database_sync_to_async(stops.banner_context)(
+            self.scope["user"], self.robot
+        )
+        # A plain form on the robot's page posts the session's CSRF secret (the cookie's value,
+        # which Django takes as a token); the panel's posts with htmx's header.
+        token = self.scope.get("cookies", {}).get(settings.CSRF_COOKIE_NAME, "")
+        context.update(oob=True, panel=self.panel, csrf_token=token)
+        await self.send(render_to_string("robots/_estop.html", context))
+
     async def robot_runs(self, event):
+        if self.panel:
+            return
         await self.send(await database_sync_to_async(self._render_runs)())
 
     def _render_runs(self) -> str:
