@@ -1,5 +1,6 @@
 # make run   set up and serve the appliance on http://127.0.0.1:8000 (embedded mode)
 # make test  install what the tests need and run them all
+# make run BIND=HOST:PORT  serve elsewhere (a port already in use is said as such)
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -8,34 +9,50 @@ PYTEST_PARALLEL ?= -n 2
 
 .PHONY: run test lint bench bench-deps fleet fleet-secrets clean
 
-$(BIN)/robotide: pyproject.toml
-	./scripts/install-run-deps.sh $(PYTHON) --quiet
-	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[test]'
-	touch $@
+# Quiet pip: what it does is said in one line before; its warnings and errors still show.
+PIP := $(BIN)/pip install --quiet --disable-pip-version-check --progress-bar off
+# What is installed, stamped apart: `make run` installs the appliance alone (runtime), `make test`
+# adds the test tools once (and again only when pyproject.toml changes); run after test
+# installs nothing.
+RUN_DEPS := $(VENV)/.run-deps
+TEST_DEPS := $(VENV)/.test-deps
 
-run: $(BIN)/robotide
-	./scripts/install-run-deps.sh $(PYTHON)
-	$(BIN)/robotide up $(if $(BIND),--bind $(BIND))
+$(RUN_DEPS): pyproject.toml
+	@./scripts/install-run-deps.sh $(PYTHON) --quiet
+	@[ -x $(BIN)/python ] || { echo "robotide: creating the virtualenv in $(VENV)" && \
+		$(PYTHON) -m venv $(VENV); }
+	@echo "robotide: installing robotide into $(VENV) (runtime only, no test tools;" \
+		"a few minutes the first time)..."
+	@$(PIP) --upgrade pip
+	@$(PIP) -e .
+	@touch $@
 
-test: $(BIN)/robotide
+$(TEST_DEPS): $(RUN_DEPS)
+	@echo "robotide: installing the test tools into $(VENV)..."
+	@$(PIP) -e '.[test]'
+	@touch $@
+
+run: $(RUN_DEPS)
+	@./scripts/install-run-deps.sh $(PYTHON)
+	@$(BIN)/robotide up $(if $(BIND),--bind $(BIND))
+
+test: $(TEST_DEPS)
 	./scripts/install-test-deps.sh
 	./scripts/install-build-deps.sh
-	$(BIN)/pip install --quiet -e '.[ldap]'
+	$(PIP) -e '.[ldap]'
 	$(BIN)/ruff check .
 	$(BIN)/pytest $(PYTEST_PARALLEL)
 
-lint: $(BIN)/robotide
+lint: $(TEST_DEPS)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
-bench: $(BIN)/robotide
+bench: $(TEST_DEPS)
 	$(BIN)/python -m benchmarks
 
 # The compose file's services as processes on this machine, on a PostgreSQL and a Redis of
 # their own with passwords (in var/fleet: FLEET_DATA), not the machine's servers.
-fleet: $(BIN)/robotide
+fleet: $(TEST_DEPS)
 	./scripts/install-test-deps.sh --packages-only
 	$(BIN)/python -m robotide.fleet
 
@@ -46,7 +63,7 @@ fleet-secrets:
 
 # What benchmarks/gateway.py compares the router with: socat (the raw byte forwarder) and
 # MAVProxy (a reference, in the venv only: not a test dependency).
-bench-deps: $(BIN)/robotide
+bench-deps: $(TEST_DEPS)
 	command -v socat >/dev/null || { apt-get update && apt-get install -y socat; }
 	$(BIN)/pip install --quiet MAVProxy
 

@@ -17,6 +17,9 @@ robotide import USERNAME FILE [--replace]
 robotide user add NAME [--staff] [--group G] [--password-stdin]
                                  create an account; its password is printed once if generated
                                  (else from standard input or ROBOTIDE_USER_PASSWORD)
+robotide user password NAME [--password-stdin | --generate]
+                                 set a new password (asked twice, read from standard input,
+                                 or generated and printed once): a lost admin password too
 robotide route VEHICLE --to ENDPOINT [--to ...]
                                  the MAVLink router alone, no web application: VEHICLE is
                                  DEVICE[:BAUD], udp:HOST:PORT (listened on) or tcp:HOST:PORT;
@@ -30,11 +33,14 @@ robotide manage ...              Django's manage.py commands
 import argparse
 import asyncio
 import contextlib
+import errno
 import gc
+import getpass
 import json
 import os
 import resource
 import secrets
+import shutil
 import signal
 import socket
 import sys
@@ -109,6 +115,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--password-stdin", action="store_true",
         help="read the password from standard input (or set ROBOTIDE_USER_PASSWORD)",
     )  # fmt: skip
+    user_password = user_commands.add_parser(
+        "password", help="set a new password (asked twice unless read or generated)"
+    )
+    user_password.add_argument("name")
+    how = user_password.add_mutually_exclusive_group()
+    how.add_argument("--password-stdin", action="store_true", help="read it from standard input")
+    how.add_argument("--generate", action="store_true", help="make one up and print it once")
     route = commands.add_parser("route", help="the MAVLink router alone (no web application)")
     route.add_argument("vehicle", help="DEVICE[:BAUD], udp:HOST:PORT or tcp:HOST:PORT")
     route.add_argument(
@@ -285,6 +298,9 @@ def cmd_up(args, rest) -> int:
     from django.core.management import call_command
 
     host, port = parse_bind(args.bind)
+    # Bound before anything is set up or said: a busy port is told as such, not after
+    # "serving on" as a bare errno from deep in the server.
+    sock = listening_socket(host, port)
     call_command("migrate", interactive=False, verbosity=0)
     protect_data_dir()
     ensure_admin()
@@ -301,9 +317,9 @@ def cmd_up(args, rest) -> int:
     workers = f", {args.workers} workers" if args.workers > 1 else ""
     print(f"robotide serving on http://{host}:{port}/ ({mode}{workers})", flush=True)
     if args.workers > 1:
-        serve_workers(host, port, args.workers)
+        serve_workers(host, port, args.workers, sock)
     else:
-        asyncio.run(serve(host, port, with_agents=embedded))
+        asyncio.run(serve(host, port, sock, with_agents=embedded))
     return 0
 
 
@@ -322,6 +338,41 @@ def parse_bind(bind: str) -> tuple[str, int]:
     if not sep or not port.isdigit():
         raise SystemExit(f"robotide: --bind must be HOST:PORT, not {bind!r}")
     return host.strip("[]") or "127.0.0.1", int(port)
+
+
+def listening_socket(host: str, port: int) -> socket.socket:
+    """The server's socket, bound (uvicorn listens on it): as uvicorn's Config.bind_socket,
+    but what stops it is said in words, with the way to another port, and no traceback."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+        # Listening at once: two servers started together both bind (SO_REUSEADDR), one listens.
+        sock.listen(2048)  # uvicorn's backlog; it listens again with its own
+    except OSError as exc:
+        sock.close()
+        raise SystemExit(bind_refused(host, port, exc)) from None
+    # uvicorn's own socket never gets TCP_NODELAY from asyncio: each keep-alive response would
+    # wait ~40 ms for the client's delayed ACK. Linux copies the option to accepted connections.
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    sock.set_inheritable(True)
+    return sock
+
+
+def bind_refused(host: str, port: int, exc: OSError) -> str:
+    other = f"{host}:{port + 1}" if ":" not in host else f"[{host}]:{port + 1}"
+    choose = f"Choose another: make run BIND={other} (or robotide up --bind {other})"
+    if exc.errno == errno.EADDRINUSE:
+        return (
+            f"robotide: port {port} on {host} is already in use (another robotide, or another "
+            f"program?).\n{choose}"
+        )
+    if exc.errno == errno.EACCES:
+        return (
+            f"robotide: may not listen on port {port} on {host} (below 1024: root only).\n{choose}"
+        )
+    return f"robotide: cannot listen on {host}:{port}: {exc.strerror}.\n{choose}"
 
 
 def protect_data_dir() -> None:
@@ -348,7 +399,23 @@ def ensure_admin() -> None:
     )
     if not password:
         print(f"Created the admin account: user {username!r}, password {generated!r}", flush=True)
-        print("(shown once; change it at /accounts/password/)", flush=True)
+        print(
+            "(shown once; change it at /accounts/password/, or set a new one with: "
+            f"{robotide_command()} user password {username})",
+            flush=True,
+        )
+
+
+def robotide_command() -> str:
+    """How to call this command again: `robotide` where that finds it, else the path it was
+    started as (`make run` starts .venv/bin/robotide, which is on no PATH)."""
+    started = sys.argv[0]
+    found = shutil.which("robotide")
+    if os.path.basename(started) != "robotide" or (
+        found and os.path.realpath(found) == os.path.realpath(started)
+    ):
+        return "robotide"
+    return started
 
 
 def ensure_sim_robot() -> None:
@@ -375,7 +442,7 @@ def server_options() -> dict:
     }
 
 
-def serve_workers(host: str, port: int, workers: int) -> None:
+def serve_workers(host: str, port: int, workers: int, sock: socket.socket) -> None:
     """Fleet mode's web tier: uvicorn's worker processes, which it restarts if one dies; here
     the watch on the agents' heartbeats (robots.presence), in a thread of its own."""
     from uvicorn.supervisors import Multiprocess
@@ -387,15 +454,10 @@ def serve_workers(host: str, port: int, workers: int) -> None:
     config = uvicorn.Config(
         "robotide.asgi:application", host=host, port=port, workers=workers, **server_options()
     )
-    sock = config.bind_socket()
-    # uvicorn binds it so that asyncio never sets TCP_NODELAY on the connections it accepts:
-    # each keep-alive response would wait ~40 ms for the client's delayed ACK. Linux copies the
-    # listening socket's option to them.
-    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
     Multiprocess(config, sockets=[sock]).run()
 
 
-async def serve(host: str, port: int, with_agents: bool) -> None:
+async def serve(host: str, port: int, sock: socket.socket, with_agents: bool) -> None:
     from robots import bus, presence
     from robots.agent import AgentManager
 
@@ -409,7 +471,7 @@ async def serve(host: str, port: int, with_agents: bool) -> None:
     else:  # fleet mode: the agents are elsewhere, and may go silent
         watcher = asyncio.create_task(presence.watch(), name="presence")
     try:
-        await server.serve()
+        await server.serve(sockets=[sock])
     finally:
         if manager is not None:
             await manager.shutdown()
@@ -614,6 +676,60 @@ def cmd_import(args, rest) -> int:
 
 
 def cmd_user(args, rest) -> int:
+    if args.user_command == "password":
+        return cmd_user_password(args)
+    return cmd_user_add(args)
+
+
+def cmd_user_password(args) -> int:
+    from django.contrib.auth.password_validation import validate_password
+    from django.core.exceptions import ValidationError
+
+    user = _user_named(args.name)
+    if user is None:
+        return 2
+    password = new_password(args)
+    if password is None:
+        return 2
+    try:
+        validate_password(password, user)
+    except ValidationError as exc:
+        print(f"robotide: password refused: {' '.join(exc.messages)}", file=sys.stderr)
+        return 2
+    user.set_password(password)  # its sessions elsewhere end: they were signed with the old one
+    user.save(update_fields=["password"])
+    if args.generate:
+        print(f"New password of {user.username!r}: {password!r} (shown once)")
+    else:
+        print(f"New password of {user.username!r} set")
+    return 0
+
+
+def new_password(args) -> str | None:
+    """From standard input, generated, or typed twice at the terminal; None: said why not."""
+    if args.generate:
+        return secrets.token_urlsafe(12)
+    if args.password_stdin:
+        password = sys.stdin.readline().rstrip("\r\n")
+        if not password:
+            print("robotide: no password on standard input", file=sys.stderr)
+        return password or None
+    try:
+        password = getpass.getpass(f"New password of {args.name}: ")
+        again = getpass.getpass("The same again: ")
+    except (EOFError, KeyboardInterrupt):
+        print("\nrobotide: no password set", file=sys.stderr)
+        return None
+    if password != again:
+        print("robotide: the two passwords differ; nothing set", file=sys.stderr)
+        return None
+    if not password:
+        print("robotide: an empty password; nothing set", file=sys.stderr)
+        return None
+    return password
+
+
+def cmd_user_add(args) -> int:
     from django.contrib.auth import get_user_model
     from django.contrib.auth.models import Group
     from django.contrib.auth.password_validation import validate_password

@@ -34,10 +34,9 @@ if [ -z "$venv" ]; then
     exit 1
 fi
 [ "$(id -u)" -eq 0 ] || [ "$quiet" = --quiet ] && exit 0
+# Three lines: `make run` says little, and this is the one thing an ordinary user should know.
 cat >&2 <<MSG
-robotide runs as $(id -un), not root: programs run in a rootless box (user namespaces, from
-util-linux and python3), with per-process limits instead of a cgroup unless your session
-delegates one; network 'full' needs slirp4netns and /dev/net/tun open to you (Debian's
-default). The robot's page says what is in force. For more, run 'make run' as root${need:+
-(it installs:$need)}.
+robotide: running as $(id -un), not root: programs run in a rootless box (user namespaces), with
+per-process limits unless your session delegates a cgroup; the robot's page says what is in
+force. For more, 'make run' as root${need:+ (it installs:$need)}.
 MSG
