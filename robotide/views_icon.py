@@ -1,5 +1,6 @@
-"""/favicon.ico: pages name their icon, but the admin, API docs and browsers' own guesses still
-ask for the old default. Resolved per request: the static manifest exists only after collectstatic."""
+"""/favicon.ico: pages name their icon, but the admin, API docs and browsers' own guesses
+still ask for the old default. Resolved per request: the static manifest exists only after
+collectstatic."""
 
 from django.http import HttpResponsePermanentRedirect
 from django.templatetags.static import static
