@@ -11,6 +11,7 @@ from django.utils.html import escape
 from programs.error_lines import error_place
 from programs.models import program_filename
 from runlogs import files as log_files
+from runlogs import system_words
 from runlogs.files import open_log
 from runlogs.notes import pruned_text
 
@@ -133,7 +134,16 @@ def _plain_chunks(log, streams: str) -> Iterator[bytes]:
     wanted = tuple(tag.encode() for tag in streams)
     with log:
         while lines := log.file.readlines(DOWNLOAD_CHUNK):
-            yield b"".join(line[2:] for line in lines if line.startswith(wanted))
+            yield b"".join(_plain(line) for line in lines if line.startswith(wanted))
+
+
+def _plain(line: bytes) -> bytes:
+    """A line as downloaded: robotide's own in the reader's language (runlogs.system_words:
+    written in English, which the file keeps), the program's as it printed them."""
+    if not line.startswith(b"s "):
+        return line[2:]
+    text = line[2:].decode("utf-8", "replace").rstrip("\n")
+    return (system_words.line(text) + "\n").encode()
 
 
 def download(run, streams: str = "oes") -> HttpResponse:
@@ -167,14 +177,23 @@ def log_length(path: Path) -> int:
     return log_files.written_length(path)
 
 
-def render_lines(lines, place_of: Callable[[str], int | None] | None = None) -> str:
+def render_lines(
+    lines,
+    place_of: Callable[[str], int | None] | None = None,
+    link: Callable[[int], str | None] | None = None,
+) -> str:
     """HTML for log lines: stdout, stderr and robotide's own lines told apart by class; an
-    error line that points into the program carries the line (``data-line``) for the editor."""
+    error line that points into the program carries the line (``data-line``) for the editor,
+    and with ``link`` (line -> href) is a link to it, which works without scripts."""
     html = []
     for tag, text in lines:
+        if tag == "s":  # robotide's own line, written in English: in the reader's language
+            text = system_words.line(text)
         line = place_of(text) if place_of is not None and tag == "e" else None
         mark = f' data-line="{line}"' if line else ""
-        html.append(f'<div class="ln {tag}"{mark}>{escape(text)}</div>')
+        href = link(line) if line and link is not None else None
+        shown = f'<a href="{href}">{escape(text)}</a>' if href else escape(text)
+        html.append(f'<div class="ln {tag}"{mark}>{shown}</div>')
     return "".join(html)
 
 

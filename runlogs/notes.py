@@ -25,11 +25,19 @@ def pruned_text(run) -> str:
 
 
 def quota_words(reason: str) -> str:
-    """A run log quota's reason (runlogs.quota stores it in English, like the run's log) in
-    the reader's language; any other reason as it is."""
+    """A run's stored reason (runlogs.quota and the agent store it in English, like the run's
+    log) in the reader's language: a log quota's, or robotide's other wordings
+    (runlogs.system_words); any other reason as it is."""
+    from runlogs.system_words import translated
+
+    return translated(reason)
+
+
+def quota_reason_words(reason: str) -> str | None:
+    """A run log quota's reason in the reader's language; None for any other reason."""
     found = _QUOTA_STORED.fullmatch(reason)
     if found is None:
-        return reason
+        return None
     if found[2] == "a user's":
         words = _("run log quota reached (%(size)s MB for a user's logs, the oldest pruned first)")
     else:
