@@ -219,10 +219,23 @@ class UserAdmin(auth_admin.UserAdmin):
         ProviderAccountInline,
         TeachingInline,
     ]
+    # Which identity inlines belong to whom: a local account has no directory or provider
+    # identity, and an empty read-only block for each read as if it had.
+    IDENTITIES = {
+        DirectoryAccountInline: "directory_account",
+        ProviderAccountInline: "provider_account",
+    }
     list_display = [*auth_admin.UserAdmin.list_display, "origin"]
     list_filter = [*auth_admin.UserAdmin.list_filter, OriginFilter, "teaching__group"]
     list_select_related = ["directory_account", "provider_account"]
     actions = ["take_robot_access"]
+
+    def get_inlines(self, request, obj):
+        return [
+            inline
+            for inline in super().get_inlines(request, obj)
+            if inline not in self.IDENTITIES or hasattr(obj, self.IDENTITIES[inline])
+        ]
 
     @admin.display(description=gettext_lazy("origin"), ordering="directory_account")
     def origin(self, obj):

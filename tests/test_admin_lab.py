@@ -245,3 +245,16 @@ def test_taking_a_robot_from_a_superuser_says_they_keep_every_robot(
     response = _take(client, [lab["bob"], admin_user], robot)
     assert response.status_code == 200
     assert b"Superusers among them still use every robot." in response.content
+
+
+def test_a_local_accounts_page_shows_no_directory_or_provider_block(client, lab):
+    from robotide.models import DirectoryAccount
+
+    page = client.get(f"/admin/auth/user/{lab['alice'].pk}/change/").content.decode()
+    assert "From the directory (LDAP)" not in page
+    assert "From the OpenID Connect provider" not in page
+    assert "Classes taught" in page  # the inlines every account has stay
+    DirectoryAccount.objects.create(user=lab["bob"], dn="uid=bob,ou=people,dc=lab")
+    page = client.get(f"/admin/auth/user/{lab['bob'].pk}/change/").content.decode()
+    assert "From the directory (LDAP)" in page and "uid=bob,ou=people,dc=lab" in page
+    assert "From the OpenID Connect provider" not in page
