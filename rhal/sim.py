@@ -9,6 +9,8 @@ Two cameras: ``camera_jpeg()`` looks down on the arena (the robot's page shows i
 the QR code landmarks on the walls, in perspective (``capabilities()["front_camera"]``). The
 Robot API's ``snapshot()`` and ``scan_barcode()`` use the front camera of a driver that has one.
 
+It hears no sound: a program's ``listen()`` hears the phrases typed to it (``hearing``).
+
 The robot starts at the arena centre (0, 0) facing north. Nothing runs in the background: each
 call first advances the pose from the last update to now along the exact arc of the commanded
 speeds. Travel is checked against walls and boxes every centimetre, so no time step is large
@@ -47,6 +49,10 @@ class SimRobot(Robot):
     option_help = {**Robot.option_help, "arena": "the walled arena the robot starts in"}
     option_choices = {"arena": tuple(ARENAS)}
     quick = True  # computed in-process: nothing to wait for
+    # No microphone: the Robot API's listen() hears what is typed into the robot page's "Say
+    # to the robot" box instead (robots.typed_speech). A robot that hears through the
+    # computer's microphone has no such attribute (or "microphone").
+    hearing = "typed"
 
     def __init__(
         self,

@@ -13,6 +13,7 @@ from robotide import views_account as account
 from robotide.api import api
 from robotide.security import LoginForm
 from robots import gateway_views
+from robots import say as robot_say
 from robots import views as robots
 
 STARTED = timezone.now().replace(microsecond=0)  # the script catalog is as old as the process
@@ -87,6 +88,7 @@ urlpatterns = [
     path("robots/<slug:name>/queue", robots.robot_queue, name="robot-queue"),
     path("robots/<slug:name>/queue/move", robots.robot_queue_move, name="robot-queue-move"),
     path("robots/<slug:name>/queue/resume", robots.robot_queue_resume, name="robot-queue-resume"),
+    path("robots/<slug:name>/say", robot_say.robot_say, name="robot-say"),
     path("robots/<slug:name>/camera.jpg", robots.robot_camera, name="robot-camera"),
     path("robots/<slug:name>/gateway", gateway_views.robot_gateway, name="robot-gateway"),
     path(

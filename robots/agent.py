@@ -170,6 +170,7 @@ class RobotAgent:
         self.boxes = Ahead(self._make_box, self.cgroup_prefix)  # one made ahead of its run
         self._shutting_down = False
         self.handlers.update(self.queue.handlers)
+        self.handlers.update(self.api.host.handlers)  # robot.hear: the "Say to the robot" box
         self.lent_to: str | None = None  # a serial bridge client has the robot's device
         self._driver_back = asyncio.Event()  # set while the driver has its device
         self._outbox: asyncio.Queue = asyncio.Queue()
@@ -413,6 +414,7 @@ class RobotAgent:
             state["drive"] = capabilities["drive"]
             state["model"] = capabilities.get("model")  # a driver's robot model, if it has one
             state["lease"] = self.lease.holder.as_dict() if self.lease.holder else None
+            state["heard"] = self.api.host.last_heard  # what the last listen() heard
             await self.reply(message, {**state, "shows": self.shows})
         elif kind == "robot.teleop":
             holder = Holder("teleop", message["owner"], message.get("user", "?"))

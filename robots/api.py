@@ -11,7 +11,7 @@ import rhal
 from programs.api import Error
 from robotide.names import Name
 from robotide.schemas import Body
-from robots import disclosure, fair_shares, stops
+from robots import disclosure, fair_shares, say, stops
 from robots.bus import announce_robot_sync, ask_agent_sync, reconfigure_sync
 from robots.driver_settings import check_settings, known_driver
 from robots.models import Robot, get_robot_for_user, robots_for_user
@@ -159,3 +159,36 @@ def robot_resume(request, name: Name):
     """After an emergency stop: staff, the robot's owner or whoever pressed it (alone)."""
     robot = get_robot_for_user(request.user, name)
     return {"robot": robot.name, "waiting": stops.resume(request.user, robot, "the API")}
+
+
+class HearIn(Body):
+    text: str = Field(
+        min_length=1, max_length=200, description="what the robot hears, as if it was said"
+    )
+    queue: bool = Field(
+        True,
+        description="false: only if a program's listen() waits now (409 else); true: else it"
+        " waits up to 10 s for the next listen()",
+    )
+
+
+class HeardOut(Schema):
+    robot: str
+    text: str
+    listening: bool = Field(
+        description="a program's listen() was waiting and heard it; false: it waits for the next"
+    )
+
+
+@robots_router.post("/{name}/hear", response={200: HeardOut, 409: Error, 503: Error})
+def robot_hear(request, name: Name, data: HearIn):
+    """Say something to the robot's programs, as its page's "Say to the robot" box does: what
+    their listen() hears (on the sim, typed phrases are all it hears). Whoever may drive it."""
+    robot = get_robot_for_user(request.user, name)
+    if not say.may_say(request.user, robot):
+        raise HttpError(403, say.not_yours(robot))
+    try:
+        listening = say.say_sync(robot, request.user, data.text, data.queue)
+    except say.SayRefused as exc:
+        return Status(409, {"detail": str(exc)})
+    return {"robot": robot.name, "text": data.text, "listening": listening}

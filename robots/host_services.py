@@ -12,7 +12,9 @@ robot itself, done by the computer the agent runs on, offline.
   narrows what it listens for to a few commands, which makes them far more reliable. Heard
   in a process of its own (robots/hearing.py: 1 GB, 120 s, a lower priority), one recording
   at a time per robot with ``MAX_LISTEN_WAITING`` more waiting: the server never holds a
-  recording, and its loop never waits for one.
+  recording, and its loop never waits for one. Without ``wav``, a phrase typed into the
+  robot page's "Say to the robot" box is heard as well (robots.typed_speech): on the sim
+  robot, which has no microphone, it is all listen() hears.
 
 Which camera: the device in the robot's ``camera`` setting (a V4L2 camera through ffmpeg, as
 the agent's camera hub streams it to the page) when there is one; else the driver's front
@@ -51,6 +53,7 @@ from django.conf import settings
 from django.utils.translation import gettext as _
 
 import rhal
+from robots import typed_speech
 from robots.models import Robot
 from robots.rpc import ROBOT_ERROR, RpcError, bind_params
 from runbox import SYSTEM_PATH
@@ -87,6 +90,9 @@ class HostServices:
         self._waiting = 0
         self._hearing = asyncio.Lock()
         self._listeners = 0  # listen() calls being heard or waiting
+        self.typed = typed_speech.TypedSpeech()  # the robot page's "Say to the robot" box
+        self.last_heard: dict | None = None  # what the last listen() heard, for the box
+        self.handlers = {"robot.hear": self.hear_typed}
         self.methods = {
             "say": self.say,
             "snapshot": self.snapshot,
@@ -132,8 +138,10 @@ class HostServices:
             raise RpcError(ROBOT_ERROR, f"the robot's speech setting is wrong: {exc}") from None
 
     async def listen(self, active, params):
-        """One recording heard at a time on the robot, MAX_LISTEN_WAITING more waiting; each
-        in a recogniser process of its own (robots/hearing.py), never in the server."""
+        """One listen() heard at a time on the robot, MAX_LISTEN_WAITING more waiting; each
+        recording in a recogniser process of its own (robots/hearing.py), never in the
+        server. Without a recording, a phrase typed into the robot page's box is heard too
+        (robots.typed_speech)."""
         seconds, wav, words = bind_params(params, ("seconds", "wav", "words"), 0)
         seconds = _listen_seconds(seconds)
         phrases = _phrases(words)
@@ -151,10 +159,69 @@ class HostServices:
                         return await hear(phrases, recording=fd)
                     finally:
                         os.close(fd)
-                microphone = (await self.speech_settings()).get("microphone")
-                return await hear(phrases, record=partial(record, seconds, microphone))
+                return await self._hear_live(seconds, phrases)
         finally:
             self._listeners -= 1
+
+    async def _hear_live(self, seconds: float, phrases: tuple[str, ...]) -> dict:
+        """A phrase typed (waiting already, or typed within `seconds`) on a robot without a
+        microphone (the sim's driver says ``hearing = "typed"``); on one with a microphone,
+        whichever comes first: a phrase typed or what the recording says."""
+        phrase = self.typed.take()
+        if phrase is not None:
+            return self._heard(typed_speech.heard(phrase, phrases), phrase.user)
+        self._tell_hearing(listening=True)
+        try:
+            if getattr(self.agent.driver, "hearing", "microphone") == "typed":
+                phrase = await self.typed.wait(seconds)
+                if phrase is None:
+                    return {"text": "", "words": []}
+                return self._heard(typed_speech.heard(phrase, phrases), phrase.user)
+            microphone = (await self.speech_settings()).get("microphone")
+            recording = hear(phrases, record=partial(record, seconds, microphone))
+            return await self._first_heard(recording, phrases)
+        finally:
+            self._tell_hearing(listening=False)
+
+    async def _first_heard(self, recording: Awaitable[dict], phrases: tuple[str, ...]) -> dict:
+        """A phrase typed while the microphone is heard wins: the recording is given up."""
+        hearing = asyncio.ensure_future(recording)
+        typing = asyncio.ensure_future(self.typed.wait(None))
+        try:
+            await asyncio.wait({hearing, typing}, return_when=asyncio.FIRST_COMPLETED)
+            if typing.done():
+                phrase = typing.result()
+                return self._heard(typed_speech.heard(phrase, phrases), phrase.user)
+            return self._heard(hearing.result(), None)
+        finally:
+            for task in (hearing, typing):
+                task.cancel()
+            await asyncio.gather(hearing, typing, return_exceptions=True)
+
+    def _heard(self, heard: dict, typed_by: str | None) -> dict:
+        """What listen() heard, as the robot's "Say to the robot" box notes it."""
+        if heard["text"]:
+            self.last_heard = {"text": heard["text"], "typed_by": typed_by, "at": time.time()}
+            self._tell_hearing(listening=self.typed.listening)
+        return heard
+
+    def _tell_hearing(self, listening: bool) -> None:
+        self.agent.publish(
+            self.agent.group,
+            {"type": "robot.hearing", "robot": self.agent.name, "listening": listening,
+             "last": self.last_heard},
+        )  # fmt: skip
+
+    async def hear_typed(self, message: dict) -> None:
+        """``robot.hear`` from the web tier (the robot page's box, the API): a phrase typed,
+        for the listen() waiting or the next one. Who may say it was checked there."""
+        try:
+            taken = self.typed.say(message["text"], message.get("user", ""),
+                                   queue=message.get("queue", True))  # fmt: skip
+        except typed_speech.Refused as exc:
+            await self.agent.reply(message, {"refused": exc.code, "detail": str(exc)})
+            return
+        await self.agent.reply(message, {"listening": taken})
 
     # -- the camera -------------------------------------------------------------------------
 
@@ -481,7 +548,8 @@ async def record(seconds: float, device) -> bytes:
             "listen() hears the microphone through sounddevice (with PortAudio) or arecord"
             " (alsa-utils), and neither is installed on this computer"
             + _no_sound_card()
-            + ": give it a recording instead, listen(wav=FILE)",
+            + ": give it a recording instead, listen(wav=FILE), or type what to hear into the"
+            " robot page's 'Say to the robot' box",
         )
     argv = [arecord, "-q", "-t", "raw", "-f", "S16_LE", "-r", str(SAMPLE_RATE), "-c", "1"]
     argv += ["-d", str(math.ceil(seconds))]

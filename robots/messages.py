@@ -26,6 +26,7 @@ MAX_SOURCE = 4 * 1024 * 1024  # characters; programs are limited to 512 KB where
 MAX_ARGS = 1024
 MAX_ARG = 128 * 1024  # characters: Linux's own limit on one argument (MAX_ARG_STRLEN)
 MAX_ARGS_TOTAL = 1024 * 1024  # characters, all arguments together
+MAX_SAY = 1000  # characters of a phrase typed for listen() (robots.typed_speech says less)
 
 # What Program.filename can be: slugify(name) (ASCII letters, digits, "_" and "-", starting with
 # a letter or digit) and the language's extension (".py", ".sh", ...).
@@ -139,6 +140,12 @@ SCHEMAS: dict[str, dict[str, tuple[Callable, bool]]] = {
     "robot.release": {"owner": (_channel, REQUIRED)},
     "robot.take_control": {"owner": (_channel, REQUIRED), "user": (_text(), REQUIRED)},
     "robot.reconfigure": {},
+    # robots.host_services (HostServices.handlers): a phrase typed for listen()
+    "robot.hear": {
+        "text": (_text(MAX_SAY), REQUIRED),
+        "user": (_text(), OPTIONAL),
+        "queue": (_bool, OPTIONAL),
+    },
     # robots.camera (CameraHub.handlers)
     "camera.watch": {"viewer": (_channel, REQUIRED)},
     "camera.unwatch": {"viewer": (_channel, REQUIRED)},

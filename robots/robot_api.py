@@ -90,8 +90,10 @@ class RobotApi:
             "memory_set": self.memory_set,
             "memory_get": self.memory_get,
         }
-        # The paper's phone services: speech, the camera, barcodes, listening.
-        self.methods.update(HostServices(agent).methods)
+        # The paper's phone services: speech, the camera, barcodes, listening; and its
+        # `handlers` (robot.hear: a phrase typed for listen()) the agent's to dispatch.
+        self.host = HostServices(agent)
+        self.methods.update(self.host.methods)
         self.topics: dict[str, dict[Subscription, None]] = {}  # in subscription order
         self.queued = 0  # bytes waiting in all subscriptions
         self.queued_by_run: dict[int, int] = {}

@@ -73,6 +73,7 @@ def robot_state_context(robot) -> dict:
         "holder": state["lease"],
         "drive": state["drive"],
         "model": state.get("model"),
+        "heard": state.get("heard"),  # what the last listen() heard (robots/_say.html)
         "shows": show_items(state["shows"]),
     }
 
