@@ -25,6 +25,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from rhal.arena import Arena, Landmark
 from rhal.kinematics import compass_heading
+from rhal.sim_words import word
 
 MARGIN = 8
 FLOOR = (236, 236, 226)
@@ -57,7 +58,10 @@ def render_top_view(
     range_m: float,
     bumper: bool,
     size: tuple[int, int],
+    language: str = "en",
 ) -> bytes:
+    """The arena from above, its words (the rooms' names, the panel's labels) in ``language``
+    (rhal.sim_words)."""
     height = size[1]
     image = Image.new("RGB", size, PANEL)
     draw = ImageDraw.Draw(image)
@@ -85,14 +89,14 @@ def render_top_view(
     draw.line((*centre_px, *nose_px), fill=HEADING, width=2)
 
     for landmark in arena.landmarks:
-        _mark_landmark(draw, landmark, to_pixel, scale)
+        _mark_landmark(draw, landmark, to_pixel, scale, word(language, landmark.text))
 
     lines = [
-        f"hdg {compass_heading(theta):5.1f}",
-        f"rng {range_m:4.2f} m",
+        f"{word(language, 'hdg')} {compass_heading(theta):5.1f}",
+        f"{word(language, 'rng')} {range_m:4.2f} m",
         f"x {x:+.2f} m",
         f"y {y:+.2f} m",
-        "BUMP" if bumper else "",
+        word(language, "BUMP") if bumper else "",
     ]
     draw.multiline_text(
         (height + 6, MARGIN), "\n".join(lines), fill=TEXT, font=ImageFont.load_default()
@@ -103,8 +107,10 @@ def render_top_view(
     return buffer.getvalue()
 
 
-def _mark_landmark(draw: ImageDraw.ImageDraw, landmark: Landmark, to_pixel, scale: float) -> None:
-    """A landmark seen from above: a white strip on its wall and its text just inside."""
+def _mark_landmark(
+    draw: ImageDraw.ImageDraw, landmark: Landmark, to_pixel, scale: float, label: str
+) -> None:
+    """A landmark seen from above: a white strip on its wall and its name just inside."""
     normal = (math.cos(landmark.facing), math.sin(landmark.facing))
     half = landmark.size / 2
     ends = [
@@ -118,7 +124,7 @@ def _mark_landmark(draw: ImageDraw.ImageDraw, landmark: Landmark, to_pixel, scal
     ]
     inside = 5 / scale  # 5 px
     at = to_pixel(landmark.x + normal[0] * inside, landmark.y + normal[1] * inside)
-    draw.text(at, landmark.text, fill=INK, font=ImageFont.load_default(), anchor=anchor)
+    draw.text(at, label, fill=INK, font=ImageFont.load_default(), anchor=anchor)
 
 
 # -- the front camera ---------------------------------------------------------------------------

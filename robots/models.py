@@ -24,6 +24,11 @@ WHO = [
 ]
 
 
+#: Descriptions robotide gives the robots it makes (robotide.cli's sims): stored in English,
+#: translated where shown (Robot.description_shown).
+DESCRIPTIONS = (gettext_noop("Simulated robot"),)
+
+
 class Robot(models.Model):
     """A robot this appliance controls; its agent owns the hardware behind `url`."""
 
@@ -104,6 +109,12 @@ class Robot(models.Model):
 
     def __str__(self) -> str:
         return self.name
+
+    @property
+    def description_shown(self) -> str:
+        """Its description in the reader's language when it is one robotide wrote (the sim's
+        "Simulated robot", made by `robotide up`); one a person wrote, as written."""
+        return gettext(self.description) if self.description in DESCRIPTIONS else self.description
 
     @property
     def isolation_shown(self) -> str:
