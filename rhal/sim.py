@@ -28,6 +28,7 @@ from typing import Any
 from rhal.arena import ARENAS, Arena
 from rhal.base import Robot
 from rhal.kinematics import advance_pose, compass_heading
+from rhal.sim_words import LANGUAGES as SIM_LANGUAGES
 
 ROBOT_RADIUS = 0.15  # m
 MAX_RANGE = 4.0  # m, the range sensor's reach
@@ -46,8 +47,12 @@ Pose = tuple[float, float, float]
 
 class SimRobot(Robot):
     kind = "sim"
-    option_help = {**Robot.option_help, "arena": "the walled arena the robot starts in"}
-    option_choices = {"arena": tuple(ARENAS)}
+    option_help = {
+        **Robot.option_help,
+        "arena": "the walled arena the robot starts in",
+        "language": "the language of the words drawn on its camera's picture",
+    }
+    option_choices = {"arena": tuple(ARENAS), "language": SIM_LANGUAGES}
     quick = True  # computed in-process: nothing to wait for
     # No microphone: the Robot API's listen() hears what is typed into the robot page's "Say
     # to the robot" box instead (robots.typed_speech). A robot that hears through the
@@ -59,12 +64,17 @@ class SimRobot(Robot):
         url: str = "sim://",
         *,
         arena: str = "boxes",
+        language: str = "en",
         clock: Callable[[], float] = time.monotonic,
         **limits: Any,
     ) -> None:
         super().__init__(url, **limits)
         if arena not in ARENAS:
             raise ValueError(f"unknown arena {arena!r}; choose one of: {', '.join(ARENAS)}")
+        if language not in SIM_LANGUAGES:
+            known = ", ".join(SIM_LANGUAGES)
+            raise ValueError(f"unknown language {language!r}; choose one of: {known}")
+        self.language = language
         self.arena_name = arena
         self._arena: Arena = ARENAS[arena]
         self._clock = clock
@@ -135,7 +145,9 @@ class SimRobot(Robot):
     async def _camera_jpeg(self) -> bytes:
         self._advance(self._clock())
         self._derive_readings()
-        return await asyncio.to_thread(_render, self._arena, self._pose, self._range, self._bumper)
+        return await asyncio.to_thread(
+            _render, self._arena, self._pose, self._range, self._bumper, self.language
+        )
 
     async def front_camera_jpeg(self) -> bytes:
         """What a camera on the robot's nose sees now, as JPEG bytes."""
@@ -205,11 +217,13 @@ class SimRobot(Robot):
         self._bumper = self._arena.clearance(x, y) <= ROBOT_RADIUS + BUMPER_REACH
 
 
-def _render(arena: Arena, pose: Pose, range_m: float, bumper: bool) -> bytes:
+def _render(arena: Arena, pose: Pose, range_m: float, bumper: bool, language: str) -> bytes:
     # Imported here, in the worker thread, so Pillow costs nothing until a camera is watched.
     from rhal.sim_render import render_top_view
 
-    return render_top_view(arena, pose, ROBOT_RADIUS, range_m, bumper, CAMERA_SIZE)
+    return render_top_view(
+        arena, pose, ROBOT_RADIUS, range_m, bumper, CAMERA_SIZE, language=language
+    )
 
 
 def _render_front(arena: Arena, pose: Pose) -> bytes:
