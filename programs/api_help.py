@@ -9,6 +9,7 @@ from django.urls import reverse
 from django.utils.translation import gettext as _
 
 from programs.robot_api_spec import CALLS, CLIENTS, by_language
+from programs.robot_api_words import call_shown, client_shown, help_shown
 
 
 @login_required
@@ -16,7 +17,7 @@ def robot_api_help(request: HttpRequest, language: str) -> JsonResponse:
     """One language's calls: signature, parameters with units, summary, doc, example."""
     if language not in CLIENTS:
         raise Http404(_("no Robot API client for %(language)s") % {"language": repr(language)})
-    help_ = by_language(language)
+    help_ = help_shown(by_language(language))  # its words in the reader's language
     page = reverse("robot-api-page")
     for call in help_["calls"]:
         call["page"] = f"{page}#{call['name']}"
@@ -25,9 +26,9 @@ def robot_api_help(request: HttpRequest, language: str) -> JsonResponse:
 
 @login_required
 def robot_api_page(request: HttpRequest) -> HttpResponse:
-    clients = list(CLIENTS.values())
+    clients = [client_shown(client) for client in CLIENTS.values()]
     groups: dict[str, list[dict]] = {}
-    for call in CALLS:
+    for call in map(call_shown, CALLS):  # its words in the reader's language
         rows = []
         for client in clients:
             form = call.forms.get(client.language)
