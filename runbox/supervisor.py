@@ -391,11 +391,11 @@ class RunProcess:
             self._kill_handle.cancel()
         for fd in (1, 2):
             self._end_of_stream(fd)
+        outcome = self.outcome()
         if self._watcher is not None:
             self._watcher.cancel()
-            for note in self.watch.notes():
+            for note in self.watch.notes(failed=outcome.state == "failed"):
                 self._append(SYSTEM, [f"[robotide] {note}".encode()], force=True)
-        outcome = self.outcome()
         self._append(SYSTEM, [f"[robotide] {outcome.state}: {outcome.reason}".encode()], force=True)
         if self._flush_handle is not None:
             self._flush_handle.cancel()

@@ -134,12 +134,17 @@ class RunWatch:
             self.signs.add("processes")
         return [met[key] for key in ("cpu_seconds", "memory") if key in met]
 
-    def notes(self) -> list[str]:
+    def notes(self, failed: bool = True) -> list[str]:
         """The kernel-enforced limits the run came up against, for its log: its cgroup's own
-        count where it has one, else what the samples and its error messages suggest."""
+        count where it has one, else — for a run that failed — what the samples and its error
+        messages suggest. A run that ended well or was stopped by someone met none of those
+        guesses: without a cgroup the memory sample is address space reserved (VmPeak), and
+        Node.js reserves most of its limit without using it."""
         limits, peaks, signs = self.limits, self.peaks, self.signs
         met = self.box.cgroup.met() if self.box is not None and self.box.cgroup else {}
         notes = [met[key] for key in ("memory", "processes") if key in met]
+        if not failed:
+            return notes
         if "processes" not in met and (
             peaks.processes >= limits.processes - 1 or "processes" in signs
         ):

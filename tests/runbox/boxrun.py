@@ -3,7 +3,9 @@
     python3 boxrun.py '{"source": "...", "network": "loopback", "limits": {...}}'
 
 More: "args" (the program's), "ahead" (seconds the box waits, made, before its run is
-given), "refuse" (the gate's answer), "stop_after", "grace".
+given), "refuse" (the gate's answer), "stop_after", "grace"; "stop_on" (stopped as its user
+would, once it printed a line holding this text and, with "stop_on_peak_mb", once the watch
+has sampled at least that much memory).
 
 Standard library and runbox only, so that an ordinary user's python3 runs it too (the
 rootless box); the Robot API is stood in for by a TCP echo on the run's 127.0.0.1:7010.
@@ -86,6 +88,8 @@ async def run(spec: dict) -> dict:
     if spec.get("stop_after"):
         await asyncio.sleep(spec["stop_after"])
         process.stop()
+    if spec.get("stop_on"):
+        await stopped_on(process, lines, spec["stop_on"], spec.get("stop_on_peak_mb", 0))
     outcome = await process.wait()
     await box.close()
     left = box.processes()
@@ -97,6 +101,19 @@ async def run(spec: dict) -> dict:
         "api_folder": api_folder_after(sockets, api),
         "isolation": in_force.describe(limits), "runs_at_once": in_force.runs_at_once,
     }  # fmt: skip
+
+
+async def stopped_on(process, lines, text: str, peak_mb: int, deadline: float = 60.0) -> None:
+    """Stops the run once it printed `text` and its watch sampled `peak_mb` MB at least."""
+    give_up = time.monotonic() + deadline
+    while True:
+        printed = any(text in line_text for _, _, line_text in lines)
+        if printed and process.watch.peaks.memory >= peak_mb * 1024 * 1024:
+            break
+        if time.monotonic() > give_up:
+            raise TimeoutError(f"no {text!r} and {peak_mb} MB sampled: {lines[-5:]}")
+        await asyncio.sleep(0.01)
+    process.stop()
 
 
 def cgroups_here() -> CgroupSupport:

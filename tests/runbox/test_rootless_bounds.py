@@ -111,3 +111,24 @@ def test_a_runs_processes_are_the_oom_killers_first_choice(mode, readable_copy):
     result = box_run(mode, readable_copy, source, network="none")
     assert result["state"] == "finished", result["log"]
     assert "o ADJ 1000" in result["log"], result["log"]
+
+
+# Address space reserved and never touched, as Node.js's heap reservations are; then a loop.
+RESERVES = """
+import mmap, time
+reserved = mmap.mmap(-1, 700 * 1024 * 1024)
+print("READY", flush=True)
+while True:
+    time.sleep(0.05)
+"""
+
+
+@pytest.mark.parametrize("mode", ["root", "rootless"])
+def test_a_run_its_user_stops_is_not_said_to_have_met_its_memory_limit(mode, readable_copy):  # noqa: F811
+    limits = {"memory_mb": 768}  # the run reserves 700 MB of it: over 0.9 of the limit
+    result = box_run(
+        mode, readable_copy, RESERVES, limits=limits, network="none",
+        stop_on="READY", stop_on_peak_mb=700,
+    )  # fmt: skip
+    assert result["state"] == "stopped", result["log"]
+    assert "memory limit" not in result["log"], result["log"]
