@@ -33,14 +33,26 @@ import unicodedata
 from django.utils.translation import gettext as _
 from django.utils.translation import gettext_lazy as _lazy
 
-__all__ = ["BlocksError", "block_types", "to_python", "to_runnable_python"]
+__all__ = [
+    "BlocksError",
+    "block_types",
+    "header",
+    "to_python",
+    "to_python_mapped",
+    "to_runnable_python",
+]
 
 
 class BlocksError(ValueError):
     """The JSON is not a blocks program robotide can run; the message says which block."""
 
 
-HEADER = "# Generated from a blocks program by robotide: edit the blocks, not this text."
+def header() -> str:
+    """The first line of the Python made of blocks, in the active language: one comment line
+    whatever a translation holds."""
+    words = _("Generated from a blocks program by robotide: edit the blocks, not this text.")
+    return "# " + " ".join(words.split())
+
 
 # Seconds per radian a turn block waits is timed at the speed the robot says it applies.
 TURN_SPEED = 1.0  # rad/s
@@ -122,6 +134,13 @@ MAX_INTEGER = 10**18  # a JSON number larger than this is refused, not approxima
 
 def to_python(source_json: str) -> str:
     """The Python a blocks program runs as; BlocksError (a ValueError) if it cannot be."""
+    return to_python_mapped(source_json)[0]
+
+
+def to_python_mapped(source_json: str) -> tuple[str, list[str | None]]:
+    """The Python, and its source map: for each of its lines (the first at 0), the id of the
+    block that made it, None for lines of no block (the header, helpers). A run's error names
+    a line of the Python; the workbench marks the block this gives."""
     try:
         workspace = json.loads(source_json)
     except ValueError as exc:  # also a number of more digits than Python reads
@@ -132,7 +151,7 @@ def to_python(source_json: str) -> str:
         raise BlocksError(_("This blocks program is nested too deeply.")) from None
     _measure(workspace)
     try:
-        code = _Generator(workspace).program()
+        code, source_map = _Generator(workspace).program()
     except RecursionError:
         raise BlocksError(_("This blocks program is nested too deeply.")) from None
     if len(code.encode()) > MAX_CODE_BYTES:
@@ -144,7 +163,7 @@ def to_python(source_json: str) -> str:
         raise BlocksError(
             _("This blocks program cannot run as Python: %(why)s.") % {"why": exc}
         ) from None
-    return code
+    return code, source_map
 
 
 def to_runnable_python(source_json: str) -> str:
@@ -154,7 +173,12 @@ def to_runnable_python(source_json: str) -> str:
     try:
         return to_python(source_json)
     except BlocksError as exc:
-        return f"{HEADER}\nimport sys\n\nsys.exit({str(exc)!r})\n"
+        return failing(str(exc))
+
+
+def failing(why: str) -> str:
+    """A program that fails saying `why`."""
+    return f"{header()}\nimport sys\n\nsys.exit({why!r})\n"
 
 
 def block_types() -> set[str]:
@@ -316,7 +340,7 @@ class _Generator:
 
     # -- the program -----------------------------------------------------------------------
 
-    def program(self) -> str:
+    def program(self) -> tuple[str, list[str | None]]:
         for variable in self._list(self.workspace, "variables", "the workspace"):
             if not isinstance(variable, dict) or not isinstance(variable.get("name"), str):
                 raise BlocksError(_("Each of the workspace's variables needs a name."))
@@ -324,16 +348,13 @@ class _Generator:
         blocks = self.workspace.get("blocks", {})
         if not isinstance(blocks, dict):
             raise BlocksError(_("The workspace's 'blocks' must be an object with a 'blocks' list."))
-        body: list[str] = []
-        size = 0
-        for block in _in_reading_order(self._list(blocks, "blocks", "the workspace")):
-            if not isinstance(block, dict):
-                raise BlocksError(_("Each of the workspace's top blocks must be an object."))
-            stack = self._sequence(block)
-            size = _within_cap(size, stack, block)
-            body += stack
+        tops = self._list(blocks, "blocks", "the workspace")
+        if not all(isinstance(block, dict) for block in tops):
+            raise BlocksError(_("Each of the workspace's top blocks must be an object."))
+        main = self.main_stack(tops)
+        body = self._sequence(main) if main is not None else []  # capped as it is made
 
-        lines = [HEADER, "import robot, time"]
+        lines = [header(), "import robot, time"]
         if self.imports:
             lines.append(f"import {', '.join(sorted(self.imports))}")
         lines += ["", "bot = robot.Robot()"]
@@ -346,7 +367,20 @@ class _Generator:
         if self.declared:  # every variable starts as 0, so "change by" works at once
             lines += ["", *(f"{name} = 0" for name in self.declared)]
         lines += ["", *body]
-        return "\n".join(lines) + "\n"
+        source_map = [
+            getattr(line, "block", None) for text in lines for line in _split_keeping_block(text)
+        ]
+        return "\n".join(lines) + "\n", source_map
+
+    def main_stack(self, tops: list[dict]) -> dict | None:
+        """The stack that is the program: the top one, as the blocks lie (Blockly's reading
+        order), of those that can be a program's start; a value block on its own cannot.
+        Every other top block is loose: not run, as the editor shows it (greyed out)."""
+        for block in _in_reading_order(tops):
+            kind = block.get("type")
+            if not (isinstance(kind, str) and kind in self.value) or block.get("next") is not None:
+                return block
+        return None
 
     # -- walking blocks --------------------------------------------------------------------
 
@@ -357,7 +391,8 @@ class _Generator:
         while block is not None:
             self._check(block)
             if _enabled(block):
-                made = self._statement(block)
+                # A line a block inside this one made (a body) is already that block's.
+                made = [_Line(line, block.get("id")) for line in self._statement(block)]
                 size = _within_cap(size, made, block)
                 lines += made
             block = self._connected(block.get("next"), block, "next")
@@ -380,7 +415,7 @@ class _Generator:
             lines = self._sequence(self._input(block, name))
         finally:
             self.loops -= loop
-        return [INDENT + line for line in lines] or [INDENT + "pass"]
+        return [_Line(INDENT + line, line.block) for line in lines] or [INDENT + "pass"]
 
     def _code(self, block: dict, name: str, order: float, default: str, same: bool = False):
         """The code of the value input `name`, in parentheses where `order` needs them;
@@ -759,6 +794,27 @@ class _Generator:
         return f"bot.memory_get({self._text_field(block, 'KEY')!r})", CALL
 
 
+class _Line(str):
+    """A line of Python and the id of the block it was made for (None: no block's)."""
+
+    block: str | None
+
+    def __new__(cls, text: str, block=None):
+        if isinstance(text, _Line):  # made by a block inside: it stays that block's
+            return text
+        line = super().__new__(cls, text)
+        line.block = None if block is None else str(block)
+        return line
+
+
+def _split_keeping_block(text: str) -> list:
+    """The lines of `text` (a helper is one text of many lines), each with `text`'s block."""
+    if "\n" not in text:
+        return [text]
+    block = getattr(text, "block", None)
+    return [_Line(part, block) for part in text.split("\n")]
+
+
 def _within_cap(size: int, lines: list[str], block: dict) -> int:
     """`size` (characters so far) with `lines` added; refused naming `block` past the cap.
     Each stack counts its own lines as they stand, so code is refused as soon as it grows
@@ -769,9 +825,17 @@ def _within_cap(size: int, lines: list[str], block: dict) -> int:
     return size
 
 
+# Why the editor disables a loose block (Blockly's own reason for orphans). Which blocks are
+# loose is decided here from where they lie, whatever the saved reasons say.
+LOOSE = "ORPHANED_BLOCK"
+
+
 def _enabled(block: dict) -> bool:
     """Blockly skips a disabled block (and what is plugged into it) when it makes code."""
-    return block.get("enabled", True) is not False and not block.get("disabledReasons")
+    reasons = block.get("disabledReasons")
+    if isinstance(reasons, list):
+        reasons = [reason for reason in reasons if reason != LOOSE]
+    return block.get("enabled", True) is not False and not reasons
 
 
 def _in_reading_order(blocks: list) -> list:

@@ -43,13 +43,15 @@ class _Found:
     head: bool
 
 
+PYTHON = _Format(
+    # a traceback's frame, or the first line of a SyntaxError
+    frames=(re.compile(r'^[\s|]*File "(?P<path>[^"]+)", line (?P<line>\d+)(?:, in .*)?$'),),
+    start=re.compile(r"^[\s|+-]*(?:Exception Group )?Traceback \(most recent call last\):"),
+    innermost_first=False,
+)
+
 FORMATS: dict[str, _Format | None] = {  # None: no line of the source to mark
-    "python": _Format(
-        # a traceback's frame, or the first line of a SyntaxError
-        frames=(re.compile(r'^[\s|]*File "(?P<path>[^"]+)", line (?P<line>\d+)(?:, in .*)?$'),),
-        start=re.compile(r"^[\s|+-]*(?:Exception Group )?Traceback \(most recent call last\):"),
-        innermost_first=False,
-    ),
+    "python": PYTHON,
     "perl": _Format(
         frames=(re.compile(r"^\s+\S.* called at (?P<path>\S+) line (?P<line>\d+)\b"),),
         # `boom at x.pl line 4.`, `syntax error at x.pl line 4, near "my "`, `..., <STDIN> line 2.`
@@ -95,9 +97,14 @@ FORMATS: dict[str, _Format | None] = {  # None: no line of the source to mark
             re.compile(r"^(?P<path>[^:]+): (?P<line>\d+): (?P<msg>.*)$"),  # dash
         ),
     ),
-    # what runs is the Python made of the blocks: its lines are not the editor's
-    "blocks": None,
+    # What runs is the Python made of the blocks: its line is the Python's, which the
+    # workbench turns into the block that made it (programs.blocks.to_python_mapped).
+    "blocks": PYTHON,
 }
+
+# A language whose program runs as another file: the extension of the file that runs (as
+# programs.languages says), the one its errors name.
+RUNS_AS = {"blocks": ".py"}
 
 
 def error_place(language: str, text: str, program_file: str) -> ErrorPlace | None:
@@ -105,6 +112,7 @@ def error_place(language: str, text: str, program_file: str) -> ErrorPlace | Non
     or None."""
     fmt = _format(language)
     found = fmt and _find(fmt, text)
+    program_file = _running(language, program_file)
     return found.place if found and _same_file(found.path, program_file) else None
 
 
@@ -115,6 +123,7 @@ def last_error_place(language: str, lines: Iterable[str], program_file: str) -> 
     fmt = _format(language)
     if fmt is None:
         return None
+    program_file = _running(language, program_file)
     first = place = None
     taken = False  # the current error's place is found
     for text in lines:
@@ -134,6 +143,13 @@ def _format(language: str) -> _Format | None:
         return FORMATS[language]
     except KeyError:
         raise ValueError(f"No error format for the language {language!r}.") from None
+
+
+def _running(language: str, program_file: str) -> str:
+    """The file that runs for `program_file`: itself, or what it is made into."""
+    if language not in RUNS_AS:
+        return program_file
+    return str(PurePosixPath(program_file).with_suffix(RUNS_AS[language]))
 
 
 def _find(fmt: _Format, text: str) -> _Found | None:

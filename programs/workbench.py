@@ -147,7 +147,9 @@ def blocks_python(request: HttpRequest, program_id: int) -> JsonResponse:
     if not source.strip():
         return JsonResponse({"python": _("# No blocks yet: drag some from the toolbox.") + "\n"})
     try:
-        return JsonResponse({"python": blocks_worker.to_python(source)})
+        python, blocks = blocks_worker.to_python_mapped(source)
+        # blocks: the block each line is made for, to mark the one a run's error names
+        return JsonResponse({"python": python, "blocks": blocks})
     except blocks_worker.BlocksBusy as exc:
         return JsonResponse({"error": str(exc)}, status=503)
     except ValueError as exc:  # a BlocksError: its message names the block

@@ -11,9 +11,10 @@ the workbench's Python pane took 0.3-1 s); one that dies or is killed is replace
 call. A caller waits on a pipe, which holds no lock: call from a thread, never the event loop.
 
     to_python(source)           its Python, or BlocksError (a ValueError) saying why not
+    to_python_mapped(source)    that Python and its source map (a block id for each line)
     to_runnable_python(source)  what a run writes: that Python, or a program failing saying why
 """
 
-from programs.blocks_worker.pool import BlocksBusy, to_python, to_runnable_python
+from programs.blocks_worker.pool import BlocksBusy, to_python, to_python_mapped, to_runnable_python
 
-__all__ = ["BlocksBusy", "to_python", "to_runnable_python"]
+__all__ = ["BlocksBusy", "to_python", "to_python_mapped", "to_runnable_python"]

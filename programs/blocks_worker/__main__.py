@@ -1,6 +1,7 @@
 """A worker making blocks into Python (see programs.blocks_worker): one JSON request a line
-on stdin, {"source", "language"}; one JSON answer a line on stdout, {"python"} or {"error"},
-with "retire": true when it will take no more (out of memory, or near its lifetime's CPU).
+on stdin, {"source", "language"}; one JSON answer a line on stdout, {"python", "blocks"} (the
+source map: the id of the block each line of the Python is made for) or {"error"}, with
+"retire": true when it will take no more (out of memory, or near its lifetime's CPU).
 
 It runs within the address space prlimit gave it; before each program it sets its CPU cap to
 what it has used plus the seconds a program may take, so a runaway program ends it by SIGXCPU.
@@ -26,14 +27,15 @@ def main(seconds: int) -> None:
         USE_I18N=True, LANGUAGE_CODE="en", LOCALE_PATHS=[PROGRAMS / "locale"], INSTALLED_APPS=[]
     )
     django.setup()
-    from programs.blocks import BlocksError, to_python
+    from programs.blocks import BlocksError, to_python_mapped
 
     for line in sys.stdin.buffer:
         request = json.loads(line)
         _cap_cpu(seconds)
         try:
             with translation.override(request.get("language") or "en"):
-                answer = {"python": to_python(request["source"])}
+                python, blocks = to_python_mapped(request["source"])
+                answer = {"python": python, "blocks": blocks}
         except BlocksError as exc:
             answer = {"error": str(exc)}
         except MemoryError:  # the caller says so, in its user's language

@@ -13,7 +13,7 @@ from django.conf import settings
 from django.utils import translation
 from django.utils.translation import gettext as _
 
-from programs.blocks import HEADER, BlocksError
+from programs.blocks import BlocksError, failing
 from runbox import SYSTEM_PATH
 from runbox.isolation import tool
 from runbox.oom import first_to_go
@@ -36,12 +36,17 @@ def to_python(source: str) -> str:
     return _pool().make(source)
 
 
+def to_python_mapped(source: str) -> tuple[str, list[str | None]]:
+    """The Python and its source map (programs.blocks.to_python_mapped), made in a worker."""
+    return _pool().make_mapped(source)
+
+
 def to_runnable_python(source: str) -> str:
     """What a run writes and runs, as programs.blocks.to_runnable_python, made in a worker."""
     try:
         return to_python(source)
     except BlocksError as exc:
-        return f"{HEADER}\nimport sys\n\nsys.exit({str(exc)!r})\n"
+        return failing(str(exc))
 
 
 def worker_command(memory: int, seconds: int) -> list[str]:
@@ -124,6 +129,9 @@ class Pool:
         self.pid = os.getpid()
 
     def make(self, source: str) -> str:
+        return self.make_mapped(source)[0]
+
+    def make_mapped(self, source: str) -> tuple[str, list[str | None]]:
         request = {"source": source, "language": translation.get_language() or "en"}
         # A caller waits its turn behind a few programs at most, each held to `seconds`.
         if not self.free.acquire(timeout=3 * self.seconds):
@@ -154,7 +162,7 @@ class Pool:
             )
         if "error" in answer:
             raise BlocksError(answer["error"])
-        return answer["python"]
+        return answer["python"], answer["blocks"]
 
     def _take(self) -> Worker:
         with self.lock:

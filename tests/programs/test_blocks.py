@@ -601,11 +601,13 @@ async def test_standard_blocks_behave(agent, tmp_path, case):
     assert result.lines == expected, result.python
 
 
-async def test_stacks_run_top_to_bottom_as_they_lie(agent, tmp_path):
+async def test_the_top_stack_as_they_lie_runs_and_the_others_are_loose(agent, tmp_path):
+    """The program is the top stack (Blockly's reading order); the rest is loose, not run
+    (the editor greys it out): tests/programs/test_blocks_source_map.py has more."""
     lower = {**show(text("second")), "x": 0, "y": 300}
     upper = {**show(text("first")), "x": 400, "y": 10}
     source = json.dumps({"blocks": {"languageVersion": 0, "blocks": [lower, upper]}})
-    assert (await run_ok(agent, tmp_path, source)).lines == ["first", "second"]
+    assert (await run_ok(agent, tmp_path, source)).lines == ["first"]
 
 
 def test_every_block_type_is_run_here():
@@ -695,7 +697,7 @@ BAD = {
         "'break' works only inside a loop",
     ),
     "a variable the workspace lacks": (
-        json.dumps({"blocks": {"blocks": [block("variables_get", {"VAR": {"id": "nope"}})]}}),
+        json.dumps({"blocks": {"blocks": [show(block("variables_get", {"VAR": {"id": "nope"}}))]}}),
         "a variable the workspace does not have",
     ),
     "a sensor name that is no name": (
@@ -918,6 +920,27 @@ PAGE = """<!doctype html>
 """
 
 
+VALUE_TYPES = {
+    "logic_compare", "logic_operation", "logic_negate", "logic_boolean", "logic_null",
+    "math_number", "math_arithmetic", "math_random_int", "math_round", "text", "text_join",
+    "variables_get", "robot_sensor", "robot_receive", "robot_memory_get",
+}  # fmt: skip
+
+
+def each_stack_as_a_program(saved: str) -> str:
+    """The Python of each top block of `saved` as the program (a value, printed): only the
+    top stack runs, the others are loose."""
+    workspace = json.loads(saved)
+    made = []
+    for top in workspace["blocks"]["blocks"]:
+        top.pop("disabledReasons", None)  # loose where it lay
+        if top["type"] in VALUE_TYPES:
+            top = {"type": "text_print", "inputs": {"TEXT": {"block": top}}}
+        alone = {**workspace, "blocks": {"languageVersion": 0, "blocks": [top]}}
+        made.append(to_python(json.dumps(alone)))
+    return "\n".join(made)
+
+
 def test_blocks_js_mounts_a_workspace_in_chromium(tmp_path):
     chromium = os.environ.get("ROBOTIDE_TEST_CHROMIUM", "/usr/bin/chromium")
     if not Path(chromium).exists():
@@ -990,7 +1013,7 @@ def test_blocks_js_mounts_a_workspace_in_chromium(tmp_path):
                   return editor.save();
                 }"""
             )
-            python = to_python(saved)
+            python = each_stack_as_a_program(saved)
             for call in ("bot.drive(0.2, 0)", "turn(90)", "bot.sensor('position')['x']",
                          "bot.publish('news', 'hello')", "bot.receive('news', 5)",
                          "random.randint(1, 100)", "bot.memory_get('laps')",

@@ -113,12 +113,10 @@ def test_blocks_at_every_cap_still_make_python():
     """The caps leave room: an if of 100 else-ifs and an else, a join of 100 items, blocks 50
     deep, 1000 variables, all in one program."""
     full_if = if_block(100, "if", has_else=True)
-    source = ws(
-        full_if,
-        printed(join(100, "join"), "print-join"),
-        printed(negations(48), "print-deep"),  # print, 48 negations, true: 50
-        variables=[f"v{n}" for n in range(1000)],
-    )
+    deep = printed(negations(48), "print-deep")  # print, 48 negations, true: 50
+    joined = {**printed(join(100, "join"), "print-join"), "next": {"block": deep}}
+    full_if["next"] = {"block": joined}
+    source = ws(full_if, variables=[f"v{n}" for n in range(1000)])  # one stack: the program
     python = blocks.to_python(source)
     assert python.count("elif False:") == 100 and "else:" in python
     assert "not (" * 47 + "not True" + ")" * 47 in python

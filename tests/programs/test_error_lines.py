@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from programs.error_lines import FORMATS, ErrorPlace, error_place, last_error_place
+from programs.error_lines import FORMATS, RUNS_AS, ErrorPlace, error_place, last_error_place
 from programs.languages import LANGUAGES
 from runbox import SYSTEM_PATH
 from tests.conftest import in_ci
@@ -21,15 +21,18 @@ def program_file(language: str, folder: str = "/x") -> str:
 
 def test_every_language_has_a_format():
     for name, language in LANGUAGES.items():
-        # a compiled language (blocks) runs another text: no line of its source to mark
-        compiled = getattr(language, "compiler", None) is not None
-        assert name in FORMATS and (FORMATS[name] is None) == compiled, name
+        assert name in FORMATS and FORMATS[name] is not None, name
+        # a compiled language (blocks) runs another file: its errors name that one
+        if getattr(language, "compiler", None) is not None:
+            assert RUNS_AS[name] == language.compiled_extension, name
 
 
-def test_blocks_have_no_lines_to_mark():
+def test_blocks_lines_are_those_of_the_python_they_run():
+    """The line of the Python made of the blocks (the workbench maps it to a block)."""
     text = '  File "/x/line-follower.py", line 12, in <module>'
-    assert error_place("blocks", text, "line-follower.py") is None
-    assert last_error_place("blocks", [text], "line-follower.py") is None
+    assert error_place("blocks", text, "line-follower.json") == ErrorPlace(12, None, "")
+    assert last_error_place("blocks", [text], "line-follower.json") == ErrorPlace(12, None, "")
+    assert error_place("blocks", text.replace("follower", "other"), "line-follower.json") is None
 
 
 def test_an_unknown_language_is_an_error():
