@@ -19,6 +19,7 @@ from django.utils.translation import pgettext
 import rhal
 from rhal.camera import CameraSettings
 from rhal.options import Option, driver_options, url_options
+from robots.driver_words import option_shown
 from robots.fair_shares import robot_setting
 from robots.host_services import check_speech_settings
 from robots.models import RUN_SETTINGS, Robot
@@ -54,9 +55,10 @@ def check_settings(url: str, settings: dict) -> None:
 def options_for(robot: Robot) -> list[Option]:
     """The driver's options, or none when the URL names no driver that loads here."""
     try:
-        return driver_options(robot.url)
+        options = driver_options(robot.url)
     except rhal.RhalError:
         return []
+    return [option_shown(option) for option in options]  # their help in the reader's language
 
 
 def current_values(robot: Robot) -> list[dict[str, Any]]:

@@ -122,11 +122,12 @@ def english_in(text: str, patterns: dict[str, re.Pattern]) -> list[str]:
 
 @pytest.fixture
 def bia():
-    """A student whose account speaks Portuguese, with a robot, a program and an ended run."""
+    """A student whose account speaks Portuguese, with a robot of hers, a program and an ended
+    run."""
     user = User.objects.create_user("bia", password="pw-bia-123")
     LanguagePreference.objects.create(user=user, language="pt-br")
     robot, _ = Robot.objects.get_or_create(
-        name="sim", defaults={"url": "sim://", "description": "Simulated robot"}
+        name="sim", defaults={"url": "sim://", "description": "Simulated robot", "owner": user}
     )
     program = Program.objects.create(owner=user, name="Olá robô", language="python")
     program.save_source("print('Olá, robô!')\n1 / 0\n", user)
@@ -166,10 +167,12 @@ def signed_in(user) -> Client:
 def test_no_page_shown_in_portuguese_carries_an_english_string_of_the_catalogs(bia):
     patterns = english_patterns()
     assert "Programs" in patterns and "exit status %(code)s" in patterns  # the catalogs read
-    client = signed_in(bia)
+    prof = User.objects.create_superuser("prof", password="pw-prof-123")
+    LanguagePreference.objects.create(user=prof, language="pt-br")
+    staff_pages = ["/robots/sim/settings", "/robots/sim/buttons/"]  # the driver's options
     found = {}
-    for url in pages(bia):
-        page = client.get(url)
+    for user, url in [*((bia, url) for url in pages(bia)), *((prof, url) for url in staff_pages)]:
+        page = signed_in(user).get(url)
         assert page.status_code == 200, url
         assert page["Content-Language"] == "pt-br", url
         text = VisibleText.of(page.content.decode())
@@ -284,3 +287,44 @@ def test_the_sim_draws_its_words_in_its_language():
     assert portuguese != english and portuguese == asyncio.run(picture("sim://?language=pt-br"))
     with pytest.raises(ValueError, match="unknown language 'xx'"):
         rhal.connect("sim://?language=xx")
+
+
+# -- the Robot API's help ------------------------------------------------------------------------
+
+
+def test_every_text_of_the_robot_api_description_is_translated():
+    """programs/robot_api_spec.py is plain data; its texts are msgids in robot_api_words.py: a
+    text written or changed in the description and not there would be shown in English."""
+    from django.utils import translation
+
+    from programs.robot_api_spec import CALLS, CLIENTS
+    from programs.robot_api_words import TEXTS
+
+    texts = {text for client in CLIENTS.values() for text in (client.values, client.errors)}
+    for call in CALLS:
+        texts |= {call.group, call.summary, call.doc, call.returns}
+        texts |= {*call.notes.values(), *call.absent.values()}
+        texts |= {text for p in call.params for text in (p.meaning, p.default) if text}
+    said = {text for text in texts if any(c.isalpha() for c in text) and text not in UNITS}
+    assert not said - set(TEXTS), "not in programs/robot_api_words.py"
+    with translation.override("pt-br"):
+        assert [text for text in TEXTS if translation.gettext(text) == text] == []
+
+
+UNITS = {"m/s", "rad/s", "s"}
+
+
+def test_every_robot_drivers_option_help_is_translated():
+    """rhal's option help (a robot's page, its settings form): msgids in robots/driver_words.py."""
+    import importlib
+
+    import rhal
+    from robots.driver_words import TEXTS
+
+    helps = set()
+    for module, name in rhal.DRIVERS.values():
+        helps |= set(getattr(importlib.import_module(module), name).option_help.values())
+    assert not {text for text in helps if text and text not in TEXTS} - SAME_IN_PORTUGUESE
+
+
+SAME_IN_PORTUGUESE = {"cia402: m"}
