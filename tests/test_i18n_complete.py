@@ -23,7 +23,7 @@ from django.contrib.auth.models import User
 from django.test import Client
 
 from programs.models import Program, Run
-from programs.signals import EXAMPLES, example_name
+from programs.signals import EXAMPLES
 from robotide import catalogs
 from robotide.models import LanguagePreference
 from robots.models import Robot
@@ -219,6 +219,8 @@ def names_of(user) -> set[str]:
 
 
 def portuguese_names() -> set[str]:
+    from programs.signals import example_name
+
     return {example_name(filename, "pt-br") for filename in EXAMPLES}
 
 
