@@ -400,6 +400,8 @@ def move_in_queue(request, run_id: int, data: QueueMoveIn):
 
 @runs_router.post("/queue/resume", response={200: QueueResumedOut, 404: Error})
 def resume_queue(request, data: QueueResumeIn):
-    """After an emergency stop held a robot's queue: staff or its owner let it move again."""
+    """After an emergency stop held a robot's queue: staff or its owner let it move again,
+    and the runs it held start as their turns come."""
     robot = get_robot_for_user(request.user, data.robot)
-    return {"robot": robot.name, "waiting": stops.resume(request.user, robot, "the API")}
+    waiting = stops.resume(request.user, robot, "the API", start_held=True)
+    return {"robot": robot.name, "waiting": waiting}

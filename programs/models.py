@@ -129,8 +129,12 @@ class Run(models.Model):
     # Not ended: active, or waiting its turn on a busy robot (robots.run_queue). A queued run
     # never started, so an agent that goes away leaves it queued, not lost.
     ONGOING = (State.QUEUED, *ACTIVE)
-    #: Why queued runs do not move while the queue is held (a queued run's `reason`).
-    HELD = "the queue is held after an emergency stop; staff or the robot's owner resume it"
+    #: A queued run an emergency stop held (waiting then, or asked for during the stop): it
+    #: stays in line, not started, until its owner starts it again (robots.stops.start_again),
+    #: also once the stop is resumed; whatever made someone press it may still be there.
+    HELD = "held after an emergency stop"
+    #: What HELD said before (rows queued then): read as held too.
+    HELD_BEFORE = "the queue is held after an emergency stop; staff or the robot's owner resume it"
 
     program = models.ForeignKey(
         Program,
@@ -201,6 +205,11 @@ class Run(models.Model):
     @property
     def queued(self) -> bool:
         return self.state == self.State.QUEUED
+
+    @property
+    def held(self) -> bool:
+        """Queued, held by an emergency stop: it starts only when started again."""
+        return self.queued and self.reason in (self.HELD, self.HELD_BEFORE)
 
     @property
     def ongoing(self) -> bool:
@@ -412,6 +421,7 @@ def in_line(rank: int) -> str:
 #: translated where shown (Run.reason_note).
 FIXED_REASONS = (
     gettext_noop("the queue is held after an emergency stop; staff or the robot's owner resume it"),
+    gettext_noop("held after an emergency stop"),
     gettext_noop("cancelled while queued"),
     gettext_noop("its robot agent stopped while it ran"),
 )

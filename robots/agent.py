@@ -732,7 +732,8 @@ class RobotAgent:
         return after is None or after > self._last_press
 
     async def resume(self) -> bool:
-        """After an emergency stop: the robot may move again, and its queue moves."""
+        """After an emergency stop: the robot may move again, and its queue moves; the runs
+        the stop held stay in line until started again (robots.run_queue)."""
         if not self.lease.end_estop():
             return False
         self._lease_changed()

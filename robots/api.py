@@ -155,10 +155,13 @@ def robot_estop(request, name: Name):
 
 
 @robots_router.post("/{name}/resume", response={200: dict})
-def robot_resume(request, name: Name):
-    """After an emergency stop: staff, the robot's owner or whoever pressed it (alone)."""
+def robot_resume(request, name: Name, start_held: bool = False):
+    """After an emergency stop: staff, the robot's owner or whoever pressed it (alone).
+    ``waiting``: the runs it held; they stay queued, held, until started again, unless
+    ``?start_held=true``."""
     robot = get_robot_for_user(request.user, name)
-    return {"robot": robot.name, "waiting": stops.resume(request.user, robot, "the API")}
+    waiting = stops.resume(request.user, robot, "the API", start_held=start_held)
+    return {"robot": robot.name, "waiting": waiting}
 
 
 class HearIn(Body):

@@ -20,10 +20,12 @@ The order is in the database: staff and the robot's owner reorder and cancel fro
 page or the API, a run's owner (or their teacher) cancels it with the stop action, all without
 the agent; the agent is told, and reads the order when it starts the next.
 
-An emergency stop while runs wait *holds* the queue: nothing more starts on its own until
-staff or the robot's owner resume it (the robot's page, or ``POST /api/runs/queue/resume``),
-since whatever made someone press it is likely still there; each waiting run says so. The hold
-is kept in the waiting runs (their ``reason``), so it survives the agent's restart. Queued runs
+An emergency stop *holds* the runs waiting then and those asked for until it is resumed (their
+``reason`` is ``Run.HELD``, so the hold survives the agent's restart). Whatever made someone
+press it is likely still there: a resume (staff, the robot's owner or whoever pressed it,
+robots.stops) lets the robot move, but a held run stays in line, not started, until its owner
+(or staff, or the robot's owner) starts it again, or the one who resumes chooses to start
+them all then. A held run does not hold up the others, nor count as waiting. Queued runs
 survive an agent that stops or goes silent (they never started: not ``lost``) and are served
 when it is back; their owners may cancel them meanwhile.
 
@@ -65,6 +67,7 @@ log = logging.getLogger(__name__)
 TICK = 0.25  # seconds between looks at the lease (a person gone idle) and the turn's end
 SHARES_LOOK = 3.0  # seconds between looks at runs waiting for a share, if no word came
 RETRY_DELAY = 1.0
+HELD_REASONS = (Run.HELD, Run.HELD_BEFORE)  # a held run's reason (Run.held)
 CHANGED, RESUME = "run.queue_changed", "run.queue_resume"  # RESUME: web tiers of old
 
 
@@ -90,7 +93,7 @@ class RunQueue:
         self._shares_looked = -math.inf  # loop time of the last look
         self._box_cap_said: int | None | bool = False  # what the robot's row says (False: unsaid)
         self._counted = False  # whether the database has been asked since the agent started
-        self.held = False  # after an emergency stop: nothing starts until someone resumes
+        self.held = False  # an emergency stop in force: nothing starts until it is resumed
         # The lease-holding run's turn while others wait: (its run id, loop time it ends).
         self._turn: tuple[int | str, float] | None = None
         self._limit = 0.0
@@ -98,6 +101,7 @@ class RunQueue:
         self._closing = False
         self._task: asyncio.Task | None = None
         self._marking: set[asyncio.Task] = set()  # tasks of the holds and cancels
+        self._holding: asyncio.Task | None = None  # the last stop's marking of the held runs
         self.handlers = {CHANGED: self._changed, RESUME: self._resume}
 
     # -- hooks of the agent -----------------------------------------------------------------
@@ -120,6 +124,8 @@ class RunQueue:
         rank = await database_sync_to_async(Run.enqueue)(run_id, reason)
         if rank is None:  # stopped or failed before it was handled: nothing to queue
             return True
+        if not reason:
+            await self._held_if_stopped(run_id)
         if run_id in self.agent.cancelled:  # its stop came while it was being queued
             self.cancel(run_id)
         log.info("agent %s: run %s queued, %s in line", self.agent.name, run_id, rank)
@@ -136,6 +142,7 @@ class RunQueue:
         if decision.outcome is fair_shares.Admission.QUEUED:
             if run_id in self.agent.cancelled:  # its stop came while it was being queued
                 self.cancel(run_id)
+            await self._held_if_stopped(run_id)
             log.info(
                 "agent %s: run %s %s, %s in line", self.agent.name, run_id, decision.reason,
                 decision.rank,
@@ -143,6 +150,12 @@ class RunQueue:
             self.sharing += 1
             self.agent._run_changed(run_id)
         return True
+
+    async def _held_if_stopped(self, run_id: int) -> None:
+        """A run queued as the emergency stop came (its hold's marking may have looked before
+        it was in line) is held like the others."""
+        if self.held or self.agent.lease.estopped:
+            await database_sync_to_async(_hold_one)(run_id)
 
     def box_cap(self) -> int | None:
         """Runs the agent's isolation allows at once (runbox.isolation.InForce.runs_at_once,
@@ -190,13 +203,14 @@ class RunQueue:
         self._wake.set()
 
     def hold(self) -> None:
-        """An emergency stop: runs waiting now (for the robot or a share) stay queued until
-        someone resumes."""
-        if self.waiting or self.sharing:
-            self.held = True
-            task = asyncio.create_task(self._mark_held())
-            self._marking.add(task)
-            task.add_done_callback(self._marking.discard)
+        """An emergency stop: runs waiting now (for the robot or a share) are held, and stay
+        queued until their owners start them again (the database is asked even if none wait
+        as last counted: a count may be behind)."""
+        self.held = True
+        task = asyncio.create_task(self._mark_held())
+        self._marking.add(task)
+        task.add_done_callback(self._marking.discard)
+        self._holding = task
 
     async def serve(self) -> None:
         """Until closed: start the next run whenever the robot is free, end turns that ran out."""
@@ -231,10 +245,12 @@ class RunQueue:
         await self.resume()
 
     async def resume(self) -> None:
-        """After an emergency stop: runs waiting may start again."""
+        """After an emergency stop: the runs not held may start again; the held ones (waiting
+        at the press, or asked for since) wait until someone starts them again, which the web
+        tier says with a CHANGED."""
+        if self._holding is not None:  # a quick resume: the held runs are marked first
+            await asyncio.wait({self._holding})
         self.held = False
-        # Runs queued while this message was on its way were marked held too.
-        await database_sync_to_async(_unhold)(self.agent.name)
         await self._count()
         self.wake()
 
@@ -271,11 +287,10 @@ class RunQueue:
         self.waiting = count
 
     async def _count(self) -> None:
-        waiting, sharing, held = await database_sync_to_async(_queue_state)(self.agent.name)
+        waiting, sharing = await database_sync_to_async(_queue_state)(self.agent.name)
         self._counted = True
         self._set_waiting(waiting)
         self.sharing = sharing
-        self.held = bool(waiting or sharing) and (held or self.held)
 
     async def _step(self) -> None:
         if self.box_cap() != self._box_cap_said:  # the agent started, or was reconfigured
@@ -408,17 +423,19 @@ class RunQueue:
         self.agent.publish(robot_group(name), {"type": "robot.runs", "robot": name})
 
 
-def _queue_state(robot_name: str) -> tuple[int, int, bool]:
-    """Runs waiting for the robot, runs waiting for a share, and whether the queue is held."""
+def _queue_state(robot_name: str) -> tuple[int, int]:
+    """Runs waiting for the robot and runs waiting for a share (held runs wait for neither)."""
     queue = Run.objects.filter(robot__name=robot_name, state=Run.State.QUEUED)
+    queue = queue.exclude(reason__in=HELD_REASONS)
     sharing = queue.filter(reason__startswith=fair_shares.WAITING).count()
-    return queue.count() - sharing, sharing, queue.filter(reason=Run.HELD).exists()
+    return queue.count() - sharing, sharing
 
 
 def _line(robot_name: str) -> list[Run]:
-    """The robot's queue, the next to start first, with the runs' owners."""
+    """The robot's queue as it may start, the next first, with the runs' owners: held runs
+    are left out (they start once started again)."""
     robot_id = Robot.objects.filter(name=robot_name).values_list("pk", flat=True).first()
-    return list(Run.queue_of(robot_id).select_related("owner"))
+    return list(Run.queue_of(robot_id).exclude(reason__in=HELD_REASONS).select_related("owner"))
 
 
 def _queued_ids(robot_name: str) -> list[int]:
@@ -429,10 +446,8 @@ def _queued_ids(robot_name: str) -> list[int]:
     )
 
 
-def _unhold(robot_name: str) -> None:
-    Run.objects.filter(robot__name=robot_name, state=Run.State.QUEUED, reason=Run.HELD).update(
-        reason=""
-    )
+def _hold_one(run_id: int) -> None:
+    Run.objects.filter(pk=run_id, state=Run.State.QUEUED).update(reason=Run.HELD)
 
 
 def _hold(robot_name: str) -> list[int]:
@@ -496,10 +511,17 @@ def queue_rows(user, robot: Robot) -> list[dict]:
         rows.append({
             "rank": rank, "place": in_line(rank), "run": run if shown else None,
             "linked": run.pk in visible, "mine": run.owner_id == user.pk,
-            "why": _why(run, user) if shown else "",
+            "why": _why(run, user) if shown else "", "held": run.held,
+            "can_start": run.held and shown and may_start_again(user, run),
             "can_cancel": shown, "can_move": manager, "moves": moves,
         })  # fmt: skip
     return rows
+
+
+def may_start_again(user, run: Run) -> bool:
+    """Who starts a held run again (robots.stops.start_again): its owner, staff and the
+    robot's owner."""
+    return user.is_authenticated and (run.owner_id == user.pk or may_manage(user, run.robot))
 
 
 def _why(run: Run, user) -> str:
@@ -509,8 +531,9 @@ def _why(run: Run, user) -> str:
     return fair_shares.reason_shown(run.reason, run.owner_id == user.pk)
 
 
-def held(robot: Robot) -> bool:
-    return Run.queue_of(robot.pk).filter(reason=Run.HELD).exists()
+def held(robot: Robot) -> int:
+    """How many of the robot's queued runs an emergency stop held."""
+    return Run.queue_of(robot.pk).filter(reason__in=HELD_REASONS).count()
 
 
 def cancel(run: Run) -> bool:
@@ -536,12 +559,22 @@ def move(user, run: Run, rank: int) -> int:
     return placed
 
 
-def unhold(robot: Robot) -> int:
-    """The runs held by an emergency stop wait as any others now (robots.stops.resume);
-    how many there were. The pages hear of it; the agent is told by the caller."""
-    count = Run.queue_of(robot.pk).filter(reason=Run.HELD).update(reason="")
-    _changed(robot.name, tell_agent=False)
+def unhold(robot: Robot, run_id: int | None = None) -> int:
+    """The runs held by an emergency stop (or only ``run_id``) wait as any others now: how
+    many. Its agent (it starts them when it may) and the pages hear of it. The caller has
+    made sure the stop is not in force (robots.stops.start_again)."""
+    runs = Run.queue_of(robot.pk).filter(reason__in=HELD_REASONS)
+    if run_id is not None:
+        runs = runs.filter(pk=run_id)
+    count = runs.update(reason="")
+    _changed(robot.name)
     return count
+
+
+def queue_changed(robot: Robot) -> None:
+    """Its queue's runs changed (e.g. resumed, they are held no longer by a stop in force):
+    the pages hear of it."""
+    _changed(robot.name, tell_agent=False)
 
 
 class NotQueued(Exception):

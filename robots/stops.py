@@ -13,18 +13,36 @@ carry their record's id (ids grow in the records' order); the agent ignores a re
 than the last press it heard, so a press recorded after it wins whichever message arrives
 first. A press's reply (the runs it ended) is waited for after the lock is let go, then added
 to its record.
+
+Runs waiting at a press, or asked for during the stop, are held (robots.run_queue): a resume
+lets the robot move but starts none of them, unless the one who resumes asks for it
+(``start_held``); otherwise each starts when its owner starts it again (``start_again``). Once
+a press or resume is committed, the robot's pages hear of it (its banner, live on the robot's
+page and the workbench's panel: robots.consumers).
 """
 
 import contextlib
+import logging
 
+from channels.layers import get_channel_layer
 from django.core.exceptions import PermissionDenied
 from django.db import transaction
 from django.utils.translation import gettext as _
+from django.utils.translation import gettext_lazy as _lazy
 
 from programs.models import Run
 from robots import run_queue
-from robots.bus import AgentUnavailable, agent_reply_sync, request_agent_sync, tell_agent_sync
-from robots.models import Robot, RobotStop
+from robots.bus import (
+    AgentUnavailable,
+    agent_reply_sync,
+    blocking,
+    request_agent_sync,
+    tell_agent_sync,
+)
+from robots.models import Robot, RobotStop, robot_group
+
+log = logging.getLogger(__name__)
+WHO_RESUMES = _lazy("staff, the robot's owner or whoever pressed it")  # the words everywhere
 
 
 def press(user, robot: Robot, via: str) -> RobotStop:
@@ -45,6 +63,7 @@ def press(user, robot: Robot, via: str) -> RobotStop:
             unsent = AgentUnavailable(str(exc))
         else:
             unsent = None
+    _tell_pages(robot)
     try:
         if unsent is not None:
             raise unsent
@@ -70,26 +89,78 @@ def may_resume(user, robot: Robot, pressed: RobotStop | None) -> bool:
     )
 
 
-def resume(user, robot: Robot, via: str) -> int:
-    """The robot may move again and its queue moves: how many runs were waiting, held.
-    Decided under the lock presses take, so a press recorded (even one whose agent has not
-    answered yet) is seen. The agent is told once the resume is committed, with the record it
-    follows: it ignores a resume older than the last press it heard (RobotAgent.resume_from),
-    so a press recorded after this one keeps it stopped whichever message comes first."""
+def resume(user, robot: Robot, via: str, start_held: bool = False) -> int:
+    """The robot may move again: how many runs were waiting, held. They stay held (each
+    starts when started again) unless ``start_held``. Decided under the lock presses take,
+    so a press recorded (even one whose agent has not answered yet) is seen. The agent is
+    told once the resume is committed, with the record it follows: it ignores a resume older
+    than the last press it heard (RobotAgent.resume_from), so a press recorded after this one
+    keeps it stopped whichever message comes first."""
     with transaction.atomic():
         _one_at_a_time(robot)
         pressed = RobotStop.pressed(robot.pk)
         if not may_resume(user, robot, pressed):
             raise PermissionDenied(
-                _("Only staff, the robot's owner or whoever pressed its emergency stop resume it.")
+                _("Only %(who)s may resume the emergency stop.") % {"who": WHO_RESUMES}
             )
         last = _record(robot, "resume", user, via) if pressed is not None else _last(robot)
-        count = Run.queue_of(robot.pk).filter(reason=Run.HELD).count()
+        count = run_queue.held(robot)
     after = {"after": last.pk} if last is not None else {}
     with contextlib.suppress(Exception):  # the agent away: back, it finds it resumed
         tell_agent_sync(robot.name, "robot.resume", **after)
-    run_queue.unhold(robot)  # the pages hear of it once the resume is committed
+    _tell_pages(robot)
+    if start_held and count:  # the one who resumes chose so: after the resume, in order
+        _unhold_unless_pressed(robot, None)
+    else:
+        run_queue.queue_changed(robot)  # held runs' pages: they may be started again now
     return count
+
+
+def start_again(user, robot: Robot, run: Run | None = None) -> int:
+    """Held runs (all of the robot's, or ``run``) wait as any others, to start when the robot
+    is free: how many. Not while its emergency stop is in force (decided under the lock
+    presses take, so a press on its way is seen: its agent then holds them again)."""
+    if run is not None and not run_queue.may_start_again(user, run):
+        raise PermissionDenied(_("Only its owner, staff or the robot's owner start it again."))
+    if run is None and not run_queue.may_manage(user, robot):
+        raise PermissionDenied(_("Only staff and the robot's owner start every held run."))
+    return _unhold_unless_pressed(robot, None if run is None else run.pk)
+
+
+def _unhold_unless_pressed(robot: Robot, run_id: int | None) -> int:
+    with transaction.atomic():
+        _one_at_a_time(robot)
+        if RobotStop.pressed(robot.pk) is not None:
+            raise StillPressed(
+                _("%(robot)s's emergency stop is in force: %(who)s may resume it first.")
+                % {"robot": robot.name, "who": WHO_RESUMES}
+            )
+        return run_queue.unhold(robot, run_id)
+
+
+class StillPressed(PermissionDenied):
+    pass
+
+
+def banner_context(user, robot: Robot) -> dict:
+    """What the robot's stop banner (robots/_estop.html) says to ``user``: the stop in force,
+    whether they may resume it, and how many runs it holds."""
+    pressed = RobotStop.pressed(robot.pk)
+    return {
+        "robot": robot,
+        "pressed": pressed,
+        "may_resume": pressed is not None and may_resume(user, robot, pressed),
+        "held_runs": run_queue.held(robot) if pressed is not None else 0,
+        "who_resumes": WHO_RESUMES,
+    }
+
+
+def _tell_pages(robot: Robot) -> None:
+    """A press or resume is committed: the robot's pages show it (robots.consumers)."""
+    try:
+        blocking(get_channel_layer().group_send)(robot_group(robot.name), {"type": "robot.stop"})
+    except Exception:  # the channel layer away: the pages show it when loaded again
+        log.exception("could not tell robot %s's pages of its stop", robot.name)
 
 
 def recent(robot: Robot, count: int = 10) -> list[RobotStop]:

@@ -80,11 +80,9 @@ def robot_state_context(robot) -> dict:
 
 def stop_context(user, robot) -> dict:
     """Its emergency stop in force, if any; who may press and resume it; its recent ones."""
-    pressed = RobotStop.pressed(robot.pk)
     return {
-        "pressed": pressed,
+        **stops.banner_context(user, robot),  # pressed, may_resume, held_runs, who_resumes
         "may_estop": robot.stoppable_by(user),
-        "may_resume": pressed is not None and stops.may_resume(user, robot, pressed),
         "may_drive": robot.drivable_by(user),
         "stops": stops.recent(robot),
     }
@@ -96,6 +94,8 @@ def queue_context(user, robot) -> dict:
         "robot": robot,
         "queue": run_queue.queue_rows(user, robot),
         "queue_held": run_queue.held(robot),
+        "queue_pressed": RobotStop.pressed(robot.pk) is not None,
+        "who_resumes": stops.WHO_RESUMES,
         "can_manage_queue": run_queue.may_manage(user, robot),
         "shares": fair_shares.in_force(user, robot),
     }
@@ -126,12 +126,21 @@ def robot_queue_move(request: HttpRequest, name: str) -> HttpResponse:
 @login_required
 @require_POST
 def robot_queue_resume(request: HttpRequest, name: str) -> HttpResponse:
-    """After an emergency stop, staff or the robot's owner let the queue move again."""
+    """After an emergency stop was resumed, staff or the robot's owner start every run it
+    held, or the one run ``run``; a held run's owner starts theirs (robots.stops.start_again)."""
     robot = get_robot_for_user(request.user, name)
-    count = stops.resume(request.user, robot, "the robot's page")
+    run = None
+    if request.POST.get("run"):
+        run = get_object_or_404(Run, pk=_number(request.POST.get("run")), robot=robot)
+    try:
+        count = stops.start_again(request.user, robot, run)
+    except stops.StillPressed as exc:
+        if request.htmx:  # said beside the run page's button
+            return HttpResponse(str(exc))
+        return _queue_outcome(request, robot, error=str(exc))
     info = ngettext(
-        "The queue moves again (%(count)s waiting).",
-        "The queue moves again (%(count)s waiting).",
+        "%(count)s held run waits to start again.",
+        "%(count)s held runs wait to start again.",
         count,
     ) % {"count": count}
     return _queue_outcome(request, robot, info=info)
@@ -270,13 +279,26 @@ def robot_estop(request: HttpRequest, name: str) -> HttpResponse:
 @require_POST
 def robot_resume(request: HttpRequest, name: str) -> HttpResponse:
     robot = get_robot_for_user(request.user, name)
-    count = stops.resume(request.user, robot, "the robot's page")
-    said = ngettext(
-        "%(robot)s may move again (%(count)s run(s) waiting).",
-        "%(robot)s may move again (%(count)s run(s) waiting).",
-        count,
-    )
-    messages.info(request, said % {"robot": robot.name, "count": count})
+    start_held = request.POST.get("start_held") == "1"
+    workbench = request.htmx or request.POST.get("via") == "workbench"
+    via = "the workbench" if workbench else "the robot's page"
+    count = stops.resume(request.user, robot, via, start_held=start_held)
+    if start_held or not count:
+        said = ngettext(
+            "%(robot)s may move again (%(count)s run(s) waiting).",
+            "%(robot)s may move again (%(count)s run(s) waiting).",
+            count,
+        )
+    else:
+        said = ngettext(
+            "%(robot)s may move again; %(count)s run waits, held, until started again.",
+            "%(robot)s may move again; %(count)s runs wait, held, until started again.",
+            count,
+        )
+    said %= {"robot": robot.name, "count": count}
+    if request.htmx:  # the workbench's panel: its banner clears on the robot's websocket
+        return HttpResponse(said)
+    messages.info(request, said)
     return redirect("robot-detail", robot.name)
 
 

@@ -15,6 +15,7 @@ from channels.db import database_sync_to_async
 from channels.testing import WebsocketCommunicator
 
 from programs.models import Run
+from robots import stops
 from robots.consumers import RobotConsumer
 from robots.runs import request_stop
 from tests.e2e.agents import DEADLINE, run_program, until
@@ -143,9 +144,12 @@ async def test_an_emergency_stop_is_a_hard_stop(kind, robot_on):
     await asyncio.sleep(0.5)
     assert commanded(kind, peer, agent) == (0.0, 0.0) and agent.lease.estopped
 
-    # Whoever pressed it resumes: the run waiting starts and may drive.
+    # Whoever pressed it resumes; the run asked for meanwhile waits, held, until its owner
+    # starts it again (issue 29): then it starts and may drive.
     status, body = await api(user, "POST", f"/api/robots/{kind}/resume")
-    assert status == 200, body
+    assert status == 200 and body["waiting"] == 1, body
+    assert (await fresh(again)).state == "queued" and again.reason == Run.HELD
+    await database_sync_to_async(stops.start_again)(user, robot, again)
     await in_state(again, "running")
     await until(lambda: commanded(kind, peer, agent)[0] > 0, what="driving again")
     await page.disconnect()

@@ -16,7 +16,7 @@ from channels.db import database_sync_to_async
 from django.contrib.auth.models import User
 
 from programs.models import Run
-from robots import fair_shares, run_queue
+from robots import fair_shares, run_queue, stops
 from robots.bus import ask_agent
 from robots.models import Robot
 from tests.e2e.agents import DEADLINE, run_program, until
@@ -192,6 +192,8 @@ async def test_an_emergency_stop_holds_runs_waiting_for_a_share_too(robot_on, li
     await until_reason(waits, Run.HELD)  # its share is free, yet it waits: held
     assert (await fresh(waits)).state == "queued"
     assert (await ask_agent("sim", "robot.resume"))["resumed"] is True
+    assert (await fresh(waits)).reason == Run.HELD  # until started again (issue 29)
+    await database_sync_to_async(stops.start_again)(alice, robot, waits)
     await in_state(waits, "running")
     await let_end(agent, waits)
 

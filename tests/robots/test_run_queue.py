@@ -244,14 +244,16 @@ def test_a_held_queue_says_so_and_its_manager_resumes_it(lab):
     a, b = queued(users["alice"], robot), queued(users["bob"], robot)
     Run.objects.filter(pk__in=[a.pk, b.pk]).update(reason=Run.HELD)
     as_alice = signed_in(users["alice"]).get("/robots/arm/queue").content.decode()
-    assert "After an emergency stop" in as_alice and "Resume the queue" not in as_alice
+    # Once the stop is resumed, held runs wait until started again: staff or the robot's
+    # owner start them all (each run's owner starts theirs: tests/robots/test_resume_holds.py).
+    assert "After an emergency stop" in as_alice and "Start every held run" not in as_alice
     assert api(users["alice"])("POST", "/api/runs/queue/resume", {"robot": "arm"})[0] == 403
     olga = signed_in(users["olga"])
-    assert "Resume the queue" in olga.get("/robots/arm/queue").content.decode()
+    assert "Start every held run" in olga.get("/robots/arm/queue").content.decode()
     response = olga.post("/robots/arm/queue/resume")
     assert response.status_code == 302
     assert set(Run.objects.filter(pk__in=[a.pk, b.pk]).values_list("reason", flat=True)) == {""}
-    assert "robot.resume" in agent_messages(robot)
+    assert run_queue.CHANGED in agent_messages(robot)
     assert not run_queue.held(robot)
 
 
