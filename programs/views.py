@@ -30,7 +30,8 @@ from programs.languages import (
     get_language,
 )
 from programs.models import Program, Run, Share
-from programs.runlog import download, places_in, read_for_page, render_lines
+from programs.run_page import run_page_context
+from programs.runlog import download
 from programs.shares import ShareError, add_share
 from robots import run_queue
 from robots.models import get_robot_for_user, robots_for_user
@@ -397,10 +398,7 @@ def run_tables_context(user, robot: str | None) -> dict:
 @login_required
 def run_detail(request: HttpRequest, run_id: int) -> HttpResponse:
     run = get_run_for_user(request.user, run_id)
-    lines, skipped, offset = read_for_page(run)
-    log_html = render_lines(lines, places_in(run))
-    context = {"run": run, "log_html": log_html, "skipped": skipped, "offset": offset}
-    return render(request, "runs/detail.html", context)
+    return render(request, "runs/detail.html", run_page_context(request, run))
 
 
 @login_required

@@ -1,8 +1,10 @@
+import time
 from datetime import timedelta
 
 import nh3
 from django import template
 from django.utils.formats import get_format
+from django.utils.html import format_html
 from django.utils.safestring import mark_safe
 from django.utils.translation import gettext as _
 
@@ -26,6 +28,16 @@ def duration(value: timedelta | None) -> str:
         return f"{minutes} min {secs:02d} s"
     hours, minutes = divmod(minutes, 60)
     return f"{hours} h {minutes:02d} min"
+
+
+@register.filter
+def running_clock(run) -> str:
+    """A running run's duration so far, for its page's script to count on each second
+    (robotide/run.js): when it started and the server's time now, in ms, so a browser's clock
+    set wrong counts from the server's reading. Without scripts it stays as rendered."""
+    started, now = round(run.started.timestamp() * 1000), round(time.time() * 1000)
+    html = '<span class="clock" data-started-ms="{}" data-now-ms="{}">{}</span>'
+    return format_html(html, started, now, duration(run.duration))
 
 
 @register.filter
