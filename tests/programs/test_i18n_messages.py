@@ -126,7 +126,7 @@ def test_model_and_admin_labels():
         assert str(RunAdmin.stop_runs.short_description) == "Parar as execuções selecionadas"
         assert str(ProgramAdmin.shares_count.short_description) == "compartilhamentos"
         assert in_line(2) == "2º na fila"
-        assert Run(reason=Run.HELD).reason_shown.startswith("a fila está retida")
+        assert Run(reason=Run.HELD).reason_shown == "retida após uma parada de emergência"
         assert RobotStop(via="the API").via_shown == "a API"
     with translation.override("en"):
         assert str(Run.State.QUEUED.label) == "queued"
