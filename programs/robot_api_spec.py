@@ -550,8 +550,11 @@ CALLS: tuple[Call, ...] = (
         summary="Recognise speech from the microphone or a WAV file, offline.",
         doc="Listens for some seconds on the robot's microphone, or reads a WAV file in the"
         " program's folder instead. Given words, it listens for those only, which makes short"
-        " commands far more reliable.",
-        returns="{text, words}: with words, the text is one of them, or '' when none was heard",
+        " commands far more reliable. What someone types into the \"Say to the robot\" box on"
+        " the robot's page (or beside the editor) is heard too, whichever comes first; the"
+        " simulated robot has no microphone, so on it that box is what listen() hears.",
+        returns="{text, words}: with words, the text is one of them, or '' when none was heard;"
+        " typed: true when it was typed into the box",
         params=(
             Param("seconds", "how long to listen", "s", "5", example=3),
             Param(

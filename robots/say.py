@@ -14,13 +14,13 @@ from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.core.exceptions import PermissionDenied
 from django.http import HttpRequest, HttpResponse
-from django.shortcuts import redirect
+from django.shortcuts import redirect, render
 from django.template.loader import render_to_string
 from django.utils.http import url_has_allowed_host_and_scheme
 from django.utils.translation import gettext as _
-from django.views.decorators.http import require_POST
+from django.views.decorators.http import require_http_methods
 
-from robots.bus import AgentUnavailable, ask_agent, blocking
+from robots.bus import AgentUnavailable, ask_agent, ask_agent_sync, blocking
 from robots.models import get_robot_for_user
 from robots.typed_speech import KEEP_SECONDS, MAX_CHARS, MAX_WAITING
 
@@ -56,6 +56,8 @@ async def say(robot, user, text: str, queue: bool = True) -> bool:
     """Say `text` to `robot` as `user` (who may: checked by the caller). True if a program's
     listen() was waiting and took it; False if it waits for the next listen(). SayRefused
     with the reason; AgentUnavailable if the robot's agent does not answer."""
+    if not text.strip():  # no need to ask the agent
+        raise SayRefused(refusal("empty", ""))
     reply = await ask_agent(
         robot.name, "robot.hear", text=text[: MAX_CHARS * 5], user=user.get_username(),
         queue=queue,
@@ -78,10 +80,14 @@ def outcome(text: str, listening: bool) -> str:
 
 
 @login_required
-@require_POST
+@require_http_methods(["GET", "POST"])
 def robot_say(request: HttpRequest, name: str) -> HttpResponse:
-    """The box without scripts: a form POST, answered with a message on the page it came from."""
+    """The box without scripts: a form POST, answered with a message on the page it came from;
+    GET, the box on a page of its own (the robot's page, without scripts, reloads itself)."""
     robot = get_robot_for_user(request.user, name)
+    if request.method == "GET":
+        context = {"robot": robot, "may_drive": may_say(request.user, robot)}
+        return render(request, "robots/say.html", {**context, "heard": _last_heard(robot)})
     if not may_say(request.user, robot):
         raise PermissionDenied(not_yours(robot))
     text = " ".join(request.POST.get("say", "").split())
@@ -95,6 +101,13 @@ def robot_say(request: HttpRequest, name: str) -> HttpResponse:
     if url_has_allowed_host_and_scheme(next_url, allowed_hosts={request.get_host()}):
         return redirect(next_url)
     return redirect("robot-detail", robot.name)
+
+
+def _last_heard(robot) -> dict | None:
+    try:
+        return ask_agent_sync(robot.name, "robot.state", timeout=1.0).get("heard")
+    except AgentUnavailable:
+        return None
 
 
 # -- on the robot's websocket (robots.consumers.RobotConsumer) -----------------------------

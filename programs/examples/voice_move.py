@@ -3,6 +3,10 @@
 The paper's third example. Say "move" (ahead 20 cm), "left" or "right" (a quarter turn) or
 "stop" (the robot tells how far the wall ahead is, and the program ends). Give WAV files in the
 program's folder as arguments to play them to the robot instead of the microphone, in turn.
+
+On the simulated robot, which has no microphone, type the command into the "Say to the robot"
+box on the robot's page or beside the editor, and press Enter: listen() hears what is typed
+there (on a robot with a microphone too, whichever comes first).
 """
 
 import sys

@@ -90,8 +90,20 @@ def test_a_student_who_may_not_drive_the_robot_may_not_speak_to_it(lab):
     client = Client()
     client.force_login(users["sam"])
     assert client.post("/robots/arm/say", {"say": "move"}).status_code == 403
-    page = client.get("/robots/arm/").content.decode()
-    assert 'name="say"' in page and "Only its owner and staff may speak to it" in page
+    for url in ("/robots/arm/", "/robots/arm/say"):  # the box, and the box on its own page
+        page = client.get(url).content.decode()
+        assert 'name="say"' in page and "Only its owner and staff may speak to it" in page
+
+
+@pytest.mark.django_db
+def test_the_box_speaks_portuguese(lab):
+    users, _robot = lab
+    client = Client(headers={"accept-language": "pt-br"})
+    client.force_login(users["olga"])
+    page = client.get("/robots/arm/say").content.decode()
+    assert "Diga ao robô" in page and "Nada ouvido ainda." in page
+    said = client.post("/robots/arm/say", {"say": "  "}, follow=True).content.decode()
+    assert "Digite o que o robô deve ouvir." in said
 
 
 @pytest.mark.django_db

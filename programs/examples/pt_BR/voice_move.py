@@ -5,6 +5,10 @@ inglês, por isso os comandos são palavras em inglês: diga "move" (anda 20 cm)
 "right" (um quarto de volta para a esquerda ou a direita) ou "stop" (o robô diz a que distância
 está a parede à frente, e o programa termina). Passe arquivos WAV da pasta do programa como
 argumentos para tocá-los para o robô, um de cada vez, em vez do microfone.
+
+No robô simulado, que não tem microfone, digite o comando na caixa "Diga ao robô" da página do
+robô ou ao lado do editor e tecle Enter: listen() ouve o que é digitado ali (num robô com
+microfone também, o que vier primeiro).
 """
 
 import sys
