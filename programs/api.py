@@ -27,6 +27,7 @@ from robotide import names
 from robotide.names import Name
 from robotide.schemas import Body
 from robots import run_queue, stops
+from robots.availability import robot_to_run_on
 from robots.models import get_robot_for_user
 from robots.runs import request_stop, start_run
 
@@ -217,7 +218,7 @@ def delete_program(request, program_id: int):
 @programs_router.post("/{int:program_id}/run", response={201: RunOut, 409: Error, 503: Error})
 def run_program(request, program_id: int, data: RunIn):
     program = get_program_for_user(request.user, program_id)
-    robot = get_robot_for_user(request.user, data.robot)
+    robot = robot_to_run_on(request.user, data.robot)  # no robot open to them: 409 saying why
     return Status(201, start_run(program, robot, request.user, data.args))
 
 

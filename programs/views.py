@@ -34,7 +34,8 @@ from programs.run_page import run_page_context
 from programs.runlog import download
 from programs.shares import ShareError, add_share
 from robots import run_queue
-from robots.models import get_robot_for_user, robots_for_user
+from robots.availability import no_robot_reason, robot_to_run_on
+from robots.models import robots_for_user
 from robots.runs import AgentUnreachable, RunRefused, request_stop, start_run
 
 
@@ -46,6 +47,7 @@ def program_list(request: HttpRequest) -> HttpResponse:
 def _list_context(request) -> dict:
     visible = programs_for_user(request.user)
     gallery = Share.objects.filter(program=OuterRef("pk"), everyone=True)
+    robots = robots_for_user(request.user)
     return {
         "programs": visible.filter(owner=request.user),
         # Shared with them, their classes' programs for a teacher, everything for admins.
@@ -54,7 +56,8 @@ def _list_context(request) -> dict:
         .order_by("owner__username", "name"),
         "new_form": NewProgramForm(owner=request.user, auto_id="new_%s"),
         "upload_form": UploadForm(owner=request.user, auto_id="upload_%s"),
-        "robots": robots_for_user(request.user),
+        "robots": robots,
+        "no_robot": no_robot_reason(request.user, robots),  # why Run is disabled, if it is
     }
 
 
@@ -119,6 +122,7 @@ def _render_editor(request, program, form, status=200, conflict=None):
         "is_owner": can(request.user, OWN, program),
         "shares": program.shares.select_related("user", "group"),
     }
+    context["no_robot"] = no_robot_reason(request.user, context["robots"])
     if draft := workbench.draft_to_offer(request.user, program):
         context["draft"] = draft
         context["draft_data"] = {"source": draft.source, "language": draft.language}
@@ -206,8 +210,9 @@ def _save_copy(request, program: Program, form: EditProgramForm) -> HttpResponse
 
 
 def _start(request, program: Program, robot_name: str) -> HttpResponse:
-    robot = get_robot_for_user(request.user, robot_name)
     try:
+        # No robot open to the user at all: the editor says why (robots.availability).
+        robot = robot_to_run_on(request.user, robot_name)
         run = start_run(program, robot, request.user)
     except (RunRefused, PermissionDenied) as exc:
         messages.error(request, str(exc))

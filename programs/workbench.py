@@ -30,6 +30,7 @@ from programs.access import EDIT, can, get_program_for_user
 from programs.forms import EditProgramForm, free_name, too_large
 from programs.models import MAX_SOURCE_BYTES, Draft, Program, Revision
 from robotide.security import plain_number
+from robots.availability import robot_to_run_on
 from robots.models import get_robot_for_user
 from robots.runs import RunRefused, start_run
 from robots.views import robot_state_context
@@ -72,7 +73,8 @@ def program_start(request: HttpRequest, program_id: int) -> HttpResponse:
     program = get_program_for_user(request.user, program_id)
     try:
         revision = _save(request, program) if can(request.user, EDIT, program) else None
-        robot = get_robot_for_user(request.user, request.POST.get("robot", ""))
+        # No robot open to the user: why, not a 404 (robots.availability.NoRobotOpen).
+        robot = robot_to_run_on(request.user, request.POST.get("robot", ""))
         run = start_run(program, robot, request.user)
     except Conflict as conflict:
         return _conflict(conflict)
@@ -93,7 +95,7 @@ def program_panel(request: HttpRequest, program_id: int) -> HttpResponse:
     """The chosen robot's live view for the side panel: camera, readings, what is shown."""
     get_program_for_user(request.user, program_id)
     robot = get_robot_for_user(request.user, request.GET.get("robot", ""))
-    return render(request, "programs/_panel.html", robot_state_context(robot))
+    return render(request, "programs/_panel.html", robot_state_context(robot, request.user))
 
 
 @login_required

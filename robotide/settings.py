@@ -533,6 +533,8 @@ AGENT_HEARTBEAT = env_float("ROBOTIDE_AGENT_HEARTBEAT", 2.0)
 AGENT_OFFLINE_AFTER = env_float("ROBOTIDE_AGENT_OFFLINE_AFTER", 7.0)
 # A run its online agent has not taken within this long is failed (the request was lost).
 AGENT_START_TIMEOUT = 30.0
+# What a program showed (bot.show) leaves its robot's page this long after the run ended.
+SHOWS_KEEP_SECONDS = env_float("ROBOTIDE_SHOWS_KEEP_SECONDS", 60.0)
 
 # -- MAVLink gateway (robots.gateway): the endpoints a mavlink:// robot starts with.
 # Ground stations (QGroundControl, Mission Planner) reach the robot on UDP 14550; programs run

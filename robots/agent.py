@@ -17,6 +17,7 @@ import secrets
 import shutil
 import socket
 import tempfile
+import time
 import zlib
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
@@ -40,6 +41,7 @@ from robots.camera import CameraHub
 from robots.gateway import Gateway, RunLink
 from robots.lease import ControlLease, Holder, LeaseHeld
 from robots.models import Robot, RobotStop, agent_channel, manager_channel, robot_group
+from robots.readings import age_shows
 from robots.robot_api import RobotApi
 from robots.run_queue import RunQueue
 from runbox import SYSTEM_PATH, cgroups, launcher, seccomp
@@ -850,6 +852,7 @@ class RobotAgent:
         """Latest-state snapshots, throttled at the source; all shown values once a second."""
         for tick in itertools.count():
             sensors = await self.readings()
+            self._age_shows()
             changed, self.api.changed_shows = self.api.changed_shows, {}
             full = self._shows_snapshot_due or tick % SHOWS_SNAPSHOT_EVERY == 0
             self._shows_snapshot_due = False
@@ -866,6 +869,18 @@ class RobotAgent:
                 },
             )
             await asyncio.sleep(TELEMETRY_INTERVAL)
+
+    def _age_shows(self) -> None:
+        """An ended run's values leave the page (and this memory) a while after its end:
+        until then only who may see the run sees them (robots.readings)."""
+        marked, gone = age_shows(
+            self.shows, self.runs, time.monotonic(), settings.SHOWS_KEEP_SECONDS
+        )
+        for name in gone:
+            self.api.show_costs.pop(name, None)
+            self.api.changed_shows.pop(name, None)
+        if marked or gone:
+            self._shows_snapshot_due = True  # a full snapshot: pages drop or mark them
 
     async def _heartbeat_loop(self) -> None:
         """The portal counts a robot online while this goes on (Robot.online)."""

@@ -56,7 +56,10 @@ class RobotOut(Schema):
     online: bool = Field(description="its agent sent a heartbeat within the last few seconds")
     last_seen: str | None = Field(None, description="its agent's last heartbeat")
     agent_host: str = Field("", description="where its agent runs")
-    isolation: str = Field(description="What its agent gives each run, or why runs are refused")
+    isolation: str = Field(
+        description="What its agent gives each run, or why runs are refused, for its owner and"
+        " staff; one plain sentence for others"
+    )
     # Fair shares in force (robots.fair_shares); more runs wait queued, saying why.
     runs_per_user: int | None = Field(
         None, description="runs you may have going at once, on all robots; null: no limit"
@@ -74,6 +77,10 @@ class RobotOut(Schema):
     @staticmethod
     def resolve_settings(robot, context):
         return disclosure.settings_shown(context["request"].user, robot)
+
+    @staticmethod
+    def resolve_isolation(robot, context):
+        return disclosure.isolation_api(context["request"].user, robot)
 
     @staticmethod
     def resolve_last_seen(robot):

@@ -18,7 +18,7 @@ from robotide.consumers import DirectDispatch
 from robots import stops
 from robots.bus import send_to_agent
 from robots.models import get_robot_for_user, robot_group
-from robots.readings import sensor_rows, show_items, status
+from robots.readings import ended_runs, runs_seen, sensor_rows, show_items, shows_seen, status
 from robots.say import SayOnSocket, parse_say
 
 
@@ -68,6 +68,10 @@ class RobotConsumer(SayOnSocket, DirectDispatch, AsyncWebsocketConsumer):
             await self.close(code=4404)
             return
         self.shows: dict[str, dict] = {}
+        # Of the ended runs whose values are still shown: those asked about, those this
+        # viewer may see (robots.readings.shows_seen); asked again when access is re-read.
+        self.runs_asked: set[int] = set()
+        self.runs_seen: set[int] = set()
         self.drove = False
         # The workbench's robot panel (?panel=1) shows no list of runs: it is sent none, so
         # its queue's refresh (relative to the robot page's URL) never reaches a page without it.
@@ -145,6 +149,7 @@ class RobotConsumer(SayOnSocket, DirectDispatch, AsyncWebsocketConsumer):
         if time.monotonic() - self.checked < ACCESS_RECHECK_SECONDS:
             return True
         self.checked = time.monotonic()
+        self.runs_asked, self.runs_seen = set(), set()
         robot, may_drive = await _access(self.scope["user"], self.robot.name)
         if self.drove and not may_drive:
             await send_to_agent(self.robot.name, "robot.release", owner=self.channel_name)
@@ -165,17 +170,29 @@ class RobotConsumer(SayOnSocket, DirectDispatch, AsyncWebsocketConsumer):
         if event.get("all_shows"):
             self.shows = {}
         self.shows.update(event["shows"])
+        shown = await self._shows_seen() if shows_changed else {}
         # Rendering is CPU work for each viewer, four times a second: off the event loop.
-        html = await sync_to_async(self._render, thread_sensitive=False)(event, shows_changed)
+        html = await sync_to_async(self._render, thread_sensitive=False)(
+            event, shows_changed, shown
+        )
         await self.send(html)
 
-    def _render(self, event: dict, shows_changed: bool) -> str:
+    async def _shows_seen(self) -> dict:
+        """The shown values this viewer sees: ended runs' only if they may see the run."""
+        unasked = ended_runs(self.shows) - self.runs_asked
+        if unasked:
+            user = self.scope["user"]
+            self.runs_seen |= await database_sync_to_async(runs_seen)(user, unasked)
+            self.runs_asked |= unasked
+        return shows_seen(self.shows, self.runs_seen)
+
+    def _render(self, event: dict, shows_changed: bool, shown: dict) -> str:
         sensors, units = event["sensors"], event.get("units", {})
         context = {"rows": sensor_rows(sensors, units), **status(sensors, units), "oob": True}
         html = render_to_string("robots/_sensors.html", context)
         html += render_to_string("robots/_status.html", context)
         if shows_changed:
-            context = {"shows": show_items(self.shows), "oob": True}
+            context = {"shows": show_items(shown), "oob": True}
             html += render_to_string("robots/_shows.html", context)
         return html
 

@@ -15,12 +15,13 @@ from programs.access import get_program_for_user, programs_for_user, runs_for_us
 from programs.models import Run, in_line
 from robotide.security import plain_number
 from robots import disclosure, fair_shares, gateway_views, run_queue, stops
+from robots.availability import no_robot_reason
 from robots.bus import AgentUnavailable, ask_agent_sync, reconfigure_sync
 from robots.camera import has_camera
 from robots.driver_settings import current_values
 from robots.forms import ButtonForm, RobotConfigForm
 from robots.models import RobotButton, RobotStop, get_robot_for_user, robots_for_user
-from robots.readings import sensor_rows, show_items, status
+from robots.readings import seen_by, sensor_rows, show_items, status
 from robots.runs import RunRefused, start_run
 
 SNAPSHOT_TIMEOUT = 1.0
@@ -32,7 +33,8 @@ def robot_list(request: HttpRequest) -> HttpResponse:
     robots = list(robots_for_user(request.user))
     for robot in robots:  # its driver alone, but to its owner and staff
         robot.url_shown = disclosure.url_shown(request.user, robot)
-    return render(request, "robots/list.html", {"robots": robots})
+    context = {"robots": robots, "no_robot": no_robot_reason(request.user, robots)}
+    return render(request, "robots/list.html", context)
 
 
 @login_required
@@ -44,21 +46,24 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
         "can_configure": robot.configurable_by(request.user),
         "url_shown": disclosure.url_shown(request.user, robot),
         "sees_setup": disclosure.sees_setup(request.user, robot),
+        # runbox's line (cgroup paths and names) for its owner and staff; a sentence for others.
+        "isolation_line": disclosure.isolation_line(request.user, robot),
         # Its settings' values (device paths, hosts...) for its owner and staff only.
         "options": current_values(robot) if disclosure.sees_setup(request.user, robot) else [],
         "running": runs_for_user(request.user).filter(robot=robot, state__in=Run.ACTIVE),
         "programs": programs_for_user(request.user),
         **queue_context(request.user, robot),
         **stop_context(request.user, robot),
-        **robot_state_context(robot),
+        **robot_state_context(robot, request.user),
     }
     # The gateway card once, server-side; it then reloads itself (robots/_gateway.html).
     context["gateway"] = gateway_views.gateway_context(robot, away="agent_error" in context)
     return render(request, "robots/detail.html", context)
 
 
-def robot_state_context(robot) -> dict:
-    """The robot's state now, so a page is whole before (or without) its websocket."""
+def robot_state_context(robot, user) -> dict:
+    """The robot's state now, so a page is whole before (or without) its websocket; of the
+    values programs show, those ``user`` sees (robots.readings.shows_seen)."""
     context = {"robot": robot}
     try:
         state = ask_agent_sync(robot.name, "robot.state", timeout=SNAPSHOT_TIMEOUT)
@@ -74,7 +79,7 @@ def robot_state_context(robot) -> dict:
         "drive": state["drive"],
         "model": state.get("model"),
         "heard": state.get("heard"),  # what the last listen() heard (robots/_say.html)
-        "shows": show_items(state["shows"]),
+        "shows": show_items(seen_by(user, state["shows"])),
     }
 
 

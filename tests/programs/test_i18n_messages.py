@@ -194,13 +194,12 @@ def test_how_programs_are_boxed_in_the_readers_language():
     from robots.isolation_words import isolation_shown
 
     stored = "sandbox (bubblewrap), own OS account, seccomp, network loopback; cgroup v1 (memory+swap, pids, cpu)"  # noqa: E501
-    with translation.override("en"):
-        assert isolation_shown(stored) == stored  # as runbox says it
     with translation.override("pt-br"):
         shown = isolation_shown(stored)
+    # Said again from its parts (robots.isolation_words; tests/robots/test_isolation_line.py).
     assert shown == (
-        "sandbox (bubblewrap), conta do sistema própria, seccomp, rede loopback;"
-        " cgroup v1 (memória+swap, processos, cpu)"
+        "numa sandbox (bubblewrap), cada um com sua própria conta do sistema, seccomp, rede só"
+        " no loopback; cgroup v1 (memória+swap, processos, CPU)"
     )
 
 
