@@ -40,10 +40,17 @@ EXAMPLES = {
     "square.json": gettext_noop("Drive a square (Blocks)"),
     # The same program in every language: the Robot API is the same in each.
     **{
-        f"wall_turn{lang.extension}": f"Wall and turn ({lang.label})" for lang in LANGUAGES.values()
+        f"wall_turn{lang.extension}": f"Wall and turn ({lang.label.split(' (')[0]})"
+        for lang in LANGUAGES.values()
     },
 }
 WALL_AND_TURN = gettext_noop("Wall and turn (%(language)s)")  # the names above, translated
+
+
+def short_label(filename: str) -> str:
+    """The language's label without what it adds in brackets ("JavaScript (Node.js)"), which
+    inside the example's own brackets read as doubled ones."""
+    return str(language_for_filename(filename).label).split(" (")[0]
 
 
 def example_name(filename: str, language: str) -> str:
@@ -51,8 +58,7 @@ def example_name(filename: str, language: str) -> str:
     the name EXAMPLES gives."""
     with translation.override(language):
         if filename.startswith("wall_turn"):
-            label = str(language_for_filename(filename).label)
-            return gettext(WALL_AND_TURN) % {"language": label}
+            return gettext(WALL_AND_TURN) % {"language": short_label(filename)}
         return gettext(EXAMPLES[filename])
 
 

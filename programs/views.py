@@ -324,7 +324,13 @@ def revision_detail(request: HttpRequest, program_id: int, number: int) -> HttpR
     return render(
         request,
         "programs/revision.html",
-        {"program": program, "revision": revision, "diff": [_diff_line(d) for d in diff]},
+        {
+            "program": program,
+            "revision": revision,
+            "diff": [_diff_line(d) for d in diff],
+            "current": revision.number == program.revisions.latest("number").number,
+            "can_edit": can(request.user, EDIT, program),
+        },
     )
 
 

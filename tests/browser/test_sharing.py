@@ -61,6 +61,12 @@ def test_share_read_only_copy_and_unshare(new_page, appliance, screenshot):
     expect(bob.get_by_role("button", name="Save as", exact=True)).to_be_visible()
     expect(bob.locator("section.shares")).to_have_count(0)  # only the owner shares
     expect(bob.locator(".CodeMirror")).to_contain_text("shared hello")
+    # It says so where one would type, and typing there changes nothing.
+    expect(bob.locator("#read-only-note")).to_contain_text("alice shared this program with you")
+    bob.locator(".CodeMirror").click()
+    bob.keyboard.type("typed by bob")
+    expect(bob.locator(".CodeMirror")).not_to_contain_text("typed by bob")
+    expect(bob.locator("#save-state")).not_to_have_text("Unsaved changes")
     screenshot(bob, "sharing-read-only")
 
     # Bob saves a copy: his own program, which he may edit.

@@ -13,6 +13,8 @@
     }
     var editor = CodeMirror.fromTextArea(textarea, {
       mode: textarea.dataset.editorMode || null,
+      // Another's program shared to read: typing in it would be lost (nothing can save it).
+      readOnly: textarea.readOnly,
       lineNumbers: true,
       indentUnit: 4,
       matchBrackets: true,
