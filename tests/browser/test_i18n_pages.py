@@ -163,3 +163,41 @@ def test_the_switcher_by_keyboard_and_the_choice_kept(page, new_page, screenshot
     other.get_by_label("Show the pages in").select_option("pt-br")
     other.get_by_role("button", name="Change").click()
     expect(other.get_by_role("button", name="Sair")).to_be_visible()
+
+
+def test_a_student_in_portuguese_gets_portuguese_examples_and_log_lines(
+    new_page, appliance, screenshot
+):
+    """An account made in English (by a teacher, here the CLI) whose student signs in from a
+    Portuguese browser: the examples are the Portuguese ones, and a run's page and its
+    downloaded log say robotide's own lines in Portuguese (the log file keeps English)."""
+    token = appliance.new_user("i18n-lia", password="lia-pass-1234")
+    page = new_page(locale="pt-BR")
+    page.goto("/accounts/login/")
+    page.get_by_label("Nome de usuário").fill("i18n-lia")
+    page.get_by_label("Senha").fill("lia-pass-1234")
+    page.get_by_role("button", name="Entrar").click()
+    expect(page.get_by_role("button", name="Sair")).to_be_visible()
+
+    page.goto("/programs/")
+    for name in ["Bússola", "Andar em quadrado", "Parar antes da parede (Blocos)", "Olá do shell"]:
+        expect(page.get_by_role("link", name=name, exact=True)).to_be_visible()
+    shows(page, "examples", ["Bússola"], ["Compass", "Drive a square", "Blocks"], screenshot)
+
+    programs = appliance.api("GET", "/api/programs", token=token).json()
+    hello = next(p for p in programs if p["name"] == "Olá do shell")
+    run = appliance.run_program(hello["id"], token=token)
+    ended = appliance.wait_run(run["id"])
+    page.goto(f"/runs/{run['id']}/")
+    state = {"finished": "concluída", "failed": "falhou"}[ended["state"]]
+    expect(page.locator("#log")).to_contain_text(f"[robotide] {state}: código de saída")
+    expect(page.locator("#log")).to_contain_text("Meu rumo é")  # the example's own words
+    shows(page, "run-log", ["código de saída"], ["exit status", "My heading"], screenshot)
+    page.set_viewport_size({"width": 390, "height": 844})
+    screenshot(page, "i18n-run-log-390")
+    page.goto("/programs/")
+    screenshot(page, "i18n-examples-390")
+
+    # As the browser asks for it (Playwright's own requests send no Accept-Language).
+    log = page.request.get(f"/runs/{run['id']}/log", headers={"Accept-Language": "pt-BR"}).text()
+    assert f"[robotide] {state}: código de saída" in log and "Meu rumo é" in log
