@@ -123,6 +123,14 @@ PATTERNS = [
         gettext_noop("it reached its file size limit (%(size)s MB a file)"),
     ),
     (
+        r"the agent of robot '(?P<robot>[\w-]+)' is not taking commands",
+        gettext_noop("the agent of robot '%(robot)s' is not taking commands"),
+    ),
+    (
+        r"the robot's agent cannot be reached \((?P<error>\w+)\)",
+        gettext_noop("the robot's agent cannot be reached (%(error)s)"),
+    ),
+    (
         r"its turn on the shared robot ended \((?P<seconds>[\d.]+) s\)",
         gettext_noop("its turn on the shared robot ended (%(seconds)s s)"),
     ),

@@ -330,3 +330,57 @@ def test_every_robot_drivers_option_help_is_translated():
 
 
 SAME_IN_PORTUGUESE = {"cia402: m"}
+
+
+# -- robotide's own lines about a run ------------------------------------------------------------
+
+# What runbox.supervisor, runbox.watch, runbox.cgroups, runlogs and the agent write (examples of
+# each wording), stored in English: the log file and Run.reason keep them so.
+WORDINGS = [
+    "failed: exit status 1",
+    "finished: exit status 0",
+    "failed: killed by SIGSEGV",
+    "failed: CPU time limit reached",
+    "failed: file size limit reached",
+    "stopped by user: sending SIGTERM",
+    "emergency stop: sending SIGKILL",
+    "did not stop within 3 s: sending SIGKILL",
+    "stopped: stopped by user",
+    "stopped: stopped by user before it started",
+    "stopped: robot agent shutting down",
+    "stopped: it no longer waited to start",
+    "failed: could not start: internal error (see the server's log)",
+    "failed: could not start: The Perl interpreter is not installed on this robot computer",
+    "its box could not be made: its box ended before the run began",
+    "output size limit (64 MB) reached; further output was discarded",
+    "failed: wall-clock time limit (600 s) reached",
+    "failed: CPU time limit (30 s) reached",
+    "failed: memory limit (1024 MB) reached: the kernel killed 2 of its processes",
+    "failed: the memory limit of all runs together (4096 MB) reached: the kernel killed 1 of"
+    " this run's processes",
+    "process limit (64 processes) reached",
+    "it reached its process limit (64 processes)",
+    "it reached its open files limit (256)",
+    "it came up to its memory limit (1024 MB)",
+    "it filled its folder (100 MB)",
+    "it reached its file size limit (16 MB a file)",
+    "stopped: its turn on the shared robot ended (120 s)",
+    "failed: could not start: the agent of robot 'sim' is not taking commands",
+    "failed: run log quota reached (180 MB for a user's logs, the oldest pruned first); further"
+    " output was discarded",
+]
+# English left in a Portuguese line: a few of its words (names and numbers are kept).
+ENGLISH = re.compile(r"\b(stopped|failed|finished|sending|reached|limit|its|could|start|the)\b")
+
+
+@pytest.mark.parametrize("wording", WORDINGS)
+def test_robotides_lines_are_said_in_portuguese(wording):
+    from django.utils import translation
+
+    from runlogs.system_words import line
+
+    with translation.override("pt-br"):
+        said = line(f"[robotide] {wording}")
+    assert said.startswith("[robotide] ") and not ENGLISH.search(said[len("[robotide] ") :])
+    with translation.override("en"):
+        assert line(f"[robotide] {wording}") == f"[robotide] {wording}"
