@@ -199,9 +199,8 @@ class RobotConsumer(SayOnSocket, DirectDispatch, AsyncWebsocketConsumer):
     async def robot_stop(self, event):
         """An emergency stop pressed or resumed (robots.stops): the banner shows it, and a
         Resume for whoever may."""
-        context = await database_sync_to_async(stops.banner_context)(
-            self.scope["user"], self.robot
-        )
+        user = self.scope["user"]
+        context = await database_sync_to_async(stops.banner_context)(user, self.robot)
         # A plain form on the robot's page posts the session's CSRF secret (the cookie's value,
         # which Django takes as a token); the panel's posts with htmx's header.
         token = self.scope.get("cookies", {}).get(settings.CSRF_COOKIE_NAME, "")

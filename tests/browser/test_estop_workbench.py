@@ -16,7 +16,7 @@ from tests.browser.test_workbench import new_program, open_bench
 STUDENT = "estop-bench-student"
 
 
-@pytest.fixture
+@pytest.fixture(scope="module")
 def student(appliance):
     password = "a long enough passphrase"
     argv = [ROBOTIDE, "user", "add", STUDENT, "--password-stdin"]
@@ -67,5 +67,38 @@ def test_a_stop_pressed_on_the_robot_page_shows_on_the_workbench_which_resumes_i
         assert_not_reloaded(bench)
         assert_not_reloaded(robot_page)
         screenshot(bench, "workbench-resumed-1366")
+    finally:
+        appliance.resume()
+
+
+def test_a_stop_pressed_on_the_workbench_shows_live_on_the_robot_page(new_page, appliance, student):
+    """The other way round: the student presses on her workbench; its panel offers her (who
+    pressed it) Resume; the teacher's open robot page shows the stop without a reload, and its
+    Resume (a plain form, rendered on the websocket) clears it on both."""
+    appliance.resume()
+    token = appliance.cli("token", STUDENT).strip()
+    program = appliance.create_program("Bench with a stop", "print('hi')\n", token=token)
+    robot_page = new_page()
+    sign_in(robot_page)  # admin: staff
+    robot_page.goto("/robots/sim/")
+    expect(robot_page.locator("#sensors")).to_be_visible()
+    mark_page(robot_page)
+
+    bench = new_page()
+    sign_in(bench, *student)
+    open_bench(bench, program["id"])
+    try:
+        bench.locator("#bench-estop").click()
+        stop = bench.locator("#bench-panel .estopped")
+        expect(stop).to_contain_text(f"pressed by {STUDENT}")
+        expect(stop.get_by_role("button", name=re.compile("Resume"))).to_be_visible()
+
+        banner = robot_page.locator("#estop-banner .estopped")
+        expect(banner).to_contain_text(f"pressed by {STUDENT}")
+        assert_not_reloaded(robot_page)  # it came on the robot's websocket
+        banner.get_by_role("button", name=re.compile("Resume")).click()
+        expect(robot_page.locator(".messages")).to_contain_text("may move again")
+        expect(robot_page.get_by_role("alert")).to_have_count(0)
+        expect(stop).to_have_count(0)
     finally:
         appliance.resume()
