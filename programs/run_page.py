@@ -42,5 +42,5 @@ def robot_view(request, run) -> dict:
     except Http404:
         return {}
     # say_next: the panel's "Say to the robot" form comes back here without scripts.
-    state = robot_state_context(robot)
+    state = robot_state_context(robot, request.user)
     return {"robot_view": True, "say_next": request.path, **state}
