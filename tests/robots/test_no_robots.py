@@ -53,6 +53,13 @@ def test_the_robot_list_says_why_it_is_empty(nora):
     assert WHY in listing and ASK in listing and "No robots yet." not in listing
 
 
+def test_the_reason_in_portuguese(nora):
+    client = Client(HTTP_ACCEPT_LANGUAGE="pt-br")
+    client.force_login(nora)
+    listing = html.unescape(client.get("/robots/").content.decode())
+    assert "nenhuma das suas turmas tem um" in listing and "Peça ao seu professor" in listing
+
+
 def test_the_workbench_disables_run_and_says_why(nora):
     program = program_of(nora)
     editor = page(client_of(nora), reverse("program-edit", args=[program.pk]))
@@ -63,6 +70,8 @@ def test_the_workbench_disables_run_and_says_why(nora):
     select = editor[editor.index('id="bench-robot-choice"') :]
     assert select[: select.index(">")].count("disabled") == 1
     assert "none open to you" in select[: select.index("</select>")]
+    estop = editor[editor.index('id="bench-estop"') :]
+    assert "disabled" in estop[: estop.index(">")]  # no robot to stop
 
 
 def test_run_answers_why_not_a_404(nora):
