@@ -75,12 +75,17 @@ class BridgeInline(admin.TabularInline):
 @admin.register(Robot)
 class RobotAdmin(admin.ModelAdmin):
     form = RobotAdminForm
-    list_display = ["name", "url", "description", "owner", "isolation", "last_seen"]
+    list_display = ["name", "url", "description_shown", "owner", "isolation", "last_seen"]
     readonly_fields = ["isolation", "last_seen"]
     search_fields = ["name", "url", "description"]
     list_filter = ["groups"]
     filter_horizontal = ["groups"]
     inlines = [EndpointInline, BridgeInline]
+
+    @admin.display(description=_("description"), ordering="description")
+    def description_shown(self, robot: Robot) -> str:
+        """robotide's own description ("Simulated robot") in the reader's language."""
+        return robot.description_shown
 
     def get_form(self, request, obj=None, change=False, **kwargs):
         # The admin lays out the fields a form class declares: declare this robot's options.

@@ -148,11 +148,13 @@ def pages(user) -> list[str]:
         f"/programs/{program.pk}/",
         f"/programs/{blocks.pk}/",
         f"/programs/{program.pk}/revisions/",
+        f"/programs/{program.pk}/revisions/1/",
         "/robots/",
         "/robots/sim/",
         "/runs/",
         f"/runs/{run.pk}/",
         "/accounts/",
+        "/accounts/password/",
         "/languages/",
         "/help/robot-api/",
     ]
@@ -169,14 +171,22 @@ def test_no_page_shown_in_portuguese_carries_an_english_string_of_the_catalogs(b
     assert "Programs" in patterns and "exit status %(code)s" in patterns  # the catalogs read
     prof = User.objects.create_superuser("prof", password="pw-prof-123")
     LanguagePreference.objects.create(user=prof, language="pt-br")
-    staff_pages = ["/robots/sim/settings", "/robots/sim/buttons/"]  # the driver's options
+    # The driver's options, a robot's buttons, the administration's robots and runs.
+    staff_pages = [
+        "/robots/sim/settings",
+        "/robots/sim/buttons/",
+        "/admin/",
+        "/admin/robots/robot/",
+        f"/admin/robots/robot/{Robot.objects.get(name='sim').pk}/change/",
+        "/admin/programs/run/",
+    ]
     found = {}
     for user, url in [*((bia, url) for url in pages(bia)), *((prof, url) for url in staff_pages)]:
         page = signed_in(user).get(url)
         assert page.status_code == 200, url
         assert page["Content-Language"] == "pt-br", url
         text = VisibleText.of(page.content.decode())
-        assert "Sair" in text, url  # the menu, in Portuguese: the text was read
+        assert "Sair" in text or "Encerrar sessão" in text, url  # the menu: the text was read
         if english := english_in(text, patterns):
             found[url] = english
     assert not found, "English shown in pt-BR:\n" + "\n".join(
