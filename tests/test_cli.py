@@ -1,13 +1,17 @@
 """The robotide command: first start, second start, tokens."""
 
+import getpass
+import io
 import os
 import re
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 
 import httpx
+import pytest
 
 from tests.appliance import (
     ROBOTIDE,
@@ -52,6 +56,7 @@ def test_first_start_sets_up_everything_and_prints_the_password_once(tmp_path):
     first = serve_then_stop(tmp_path)
     password = re.search(r"password '([^']+)'", first).group(1)
     assert "user 'admin'" in first and "serving on http://127.0.0.1:" in first
+    assert "robotide user password admin" in first  # how to set a new one when it is lost
     assert (tmp_path / "robotide.sqlite3").exists() and (tmp_path / "secret_key").exists()
     assert oct((tmp_path / "secret_key").stat().st_mode)[-3:] == "600"
     second = serve_then_stop(tmp_path)
@@ -88,6 +93,67 @@ def test_bad_bind_is_refused(tmp_path):
     proc = start(tmp_path, "x")
     proc.wait(timeout=30)
     assert proc.returncode != 0 and "HOST:PORT" in proc.stdout.read()
+
+
+def test_a_busy_port_is_said_with_how_to_choose_another(tmp_path):
+    with socket.socket() as taken:  # another robotide, or another program
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        proc = start(tmp_path, port)
+        output, _ = proc.communicate(timeout=START_TIMEOUT)
+    assert proc.returncode == 1, output
+    assert f"port {port} on 127.0.0.1 is already in use" in output, output
+    assert f"make run BIND=127.0.0.1:{port + 1}" in output and "--bind" in output, output
+    for noise in ("serving on", "Traceback", "Errno", "password"):
+        assert noise not in output, output
+    assert not (tmp_path / SQLITE).exists()  # said before anything is set up
+
+
+@pytest.mark.django_db
+def test_user_password_sets_a_password_a_login_then_accepts(monkeypatch, capsys):
+    from django.contrib.auth.models import User
+
+    from robotide.cli import main
+
+    User.objects.create_user("admin", password="the-lost-one-123", is_superuser=True)
+    monkeypatch.setattr(sys, "stdin", io.StringIO("found-again-4567\n"))
+    assert main(["user", "password", "admin", "--password-stdin"]) == 0
+    assert capsys.readouterr().out == "New password of 'admin' set\n"
+    assert signed_in("admin", "found-again-4567") and not signed_in("admin", "the-lost-one-123")
+
+    assert main(["user", "password", "admin", "--generate"]) == 0
+    said = capsys.readouterr().out
+    password = re.fullmatch(r"New password of 'admin': '(\S+)' \(shown once\)\n", said).group(1)
+    assert signed_in("admin", password)
+
+    typed = iter(["typed-at-the-terminal-1", "typed-at-the-terminal-1"])
+    monkeypatch.setattr(getpass, "getpass", lambda prompt: next(typed))
+    assert main(["user", "password", "admin"]) == 0
+    assert signed_in("admin", "typed-at-the-terminal-1")
+
+    typed = iter(["one-password-1234", "another-one-1234"])  # mistyped: nothing set
+    assert main(["user", "password", "admin"]) == 2
+    assert "differ" in capsys.readouterr().err
+    assert signed_in("admin", "typed-at-the-terminal-1")
+    assert main(["user", "password", "nobody", "--generate"]) == 2
+
+
+def signed_in(username: str, password: str) -> bool:
+    from django.test import Client
+
+    client = Client()
+    page = client.post("/accounts/login/", {"username": username, "password": password})
+    return page.status_code == 302 and "_auth_user_id" in client.session
+
+
+@pytest.fixture(autouse=True)
+def _keep_umask():
+    # main() tightens the process' umask for what the server writes; not for the other tests.
+    umask = os.umask(0o022)
+    os.umask(umask)
+    yield
+    os.umask(umask)
 
 
 def test_the_server_raises_its_open_files_limit_to_what_the_system_allows():
