@@ -394,3 +394,67 @@ def test_robotides_lines_are_said_in_portuguese(wording):
     assert said.startswith("[robotide] ") and not ENGLISH.search(said[len("[robotide] ") :])
     with translation.override("en"):
         assert line(f"[robotide] {wording}") == f"[robotide] {wording}"
+
+
+# -- the Portuguese examples read and run --------------------------------------------------------
+
+EXAMPLES_DIR = ROOT / "programs" / "examples"
+PT_EXAMPLES = EXAMPLES_DIR / "pt_BR"
+# A syntax check per file kind, with the language's own tool (no program is run).
+CHECKS = {
+    ".sh": ["sh", "-n"],
+    ".js": ["node", "--check"],
+    ".rb": ["ruby", "-c"],
+    ".pl": ["perl", "-c", "-I", str(ROOT / "programs" / "clients" / "perl")],
+    ".lua": ["luac", "-p"],
+}
+
+
+@pytest.mark.parametrize("example", sorted(p.name for p in PT_EXAMPLES.iterdir()))
+def test_each_portuguese_example_is_one_of_the_examples_and_reads(example):
+    import shutil
+    import subprocess
+
+    from programs.languages import language_for_filename
+
+    assert example in EXAMPLES  # the same file name as its English one, which names it
+    path, suffix = PT_EXAMPLES / example, Path(example).suffix
+    source = path.read_text()
+    if suffix == ".py":
+        compile(source, example, "exec")
+    elif suffix == ".json":  # blocks: the Python they are made into
+        _name, python = language_for_filename(example).program_file(example, source)
+        compile(python, example, "exec")
+    elif suffix in CHECKS and shutil.which(CHECKS[suffix][0]):
+        checked = subprocess.run([*CHECKS[suffix], str(path)], capture_output=True, text=True)
+        assert checked.returncode == 0, checked.stderr
+
+
+@pytest.fixture
+async def admitted(agent):
+    from tests.robot_api_server import admit
+
+    admit(agent, "good-token", 7)
+    return agent
+
+
+@pytest.mark.django_db(transaction=True)
+async def test_the_portuguese_wall_turn_drives_and_says_its_heading(admitted, tmp_path):
+    import asyncio
+
+    from programs.languages import LANGUAGES
+    from runbox import launcher
+
+    python = LANGUAGES["python"]
+    api = {"ROBOT_API": admitted.server.url, "ROBOT_TOKEN": "good-token"}
+    process = await asyncio.create_subprocess_exec(
+        *python.command(str(PT_EXAMPLES / "wall_turn.py")),
+        env=launcher.environment(python, tmp_path, api),
+        cwd=tmp_path,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+    )
+    out, err = await asyncio.wait_for(process.communicate(), 60)
+    assert process.returncode == 0, err.decode()
+    assert re.fullmatch(r"rumo: -?\d+\.\d\n", out.decode())
+    assert admitted.shows["rumo"]["value"] == float(out.decode().split()[1])
