@@ -196,7 +196,11 @@ class Run(models.Model):
         indexes = [models.Index(fields=["state"]), models.Index(fields=["robot", "state"])]
 
     def __str__(self) -> str:
-        return f"run {self.pk} of {self.program_name} on {self.robot_id}"
+        return gettext("run %(id)s of %(program)s on %(robot)s") % {
+            "id": self.pk,
+            "program": self.program_name,
+            "robot": self.robot_id,
+        }
 
     @property
     def active(self) -> bool:
