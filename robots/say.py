@@ -140,9 +140,14 @@ class SayOnSocket:
         await self.send(_say_status(outcome(text, listening)))
 
     async def robot_hearing(self, event):
-        """A listen() began or ended, or heard something (HostServices._tell_hearing)."""
-        if await self.still_allowed():
-            await self.send(heard_note(event["last"], event["listening"], oob=True))
+        """A listen() began or ended, or heard something (HostServices._tell_hearing): what
+        was heard is sent when it changed only (it is read out)."""
+        if not await self.still_allowed():
+            return
+        last, part = event["last"], "listening"
+        if last != getattr(self, "heard_sent", None):
+            self.heard_sent, part = last, None
+        await self.send(heard_note(last, event["listening"], oob=True, part=part))
 
 
 def _say_status(text: str, error: bool = False) -> str:
@@ -150,7 +155,6 @@ def _say_status(text: str, error: bool = False) -> str:
     return render_to_string("robots/_say_status.html", context)
 
 
-def heard_note(last: dict | None, listening: bool, oob: bool = False) -> str:
-    return render_to_string(
-        "robots/_heard.html", {"heard": last, "listening": listening, "oob": oob}
-    )
+def heard_note(last: dict | None, listening: bool, oob: bool = False, part=None) -> str:
+    context = {"heard": last, "listening": listening, "oob": oob, "part": part}
+    return render_to_string("robots/_heard.html", context)
