@@ -82,3 +82,16 @@ def test_as_an_ordinary_user_it_says_what_to_ask_for_and_stops(fresh):
     assert done.returncode == 1, done.stderr
     assert "apt-get install python3-venv" in done.stderr, done.stderr
     assert not (state / "apt-get.log").exists()  # not root: nothing installed
+
+
+def test_as_an_ordinary_user_with_the_venv_module_it_says_a_few_lines_and_goes_on(fresh):
+    """make run's one note to an ordinary user: a few plain lines, then the install goes on."""
+    folder, state = fresh
+    (state / "python3-venv").touch()  # the venv module there: nothing to ask for
+    nobody = ["setpriv", f"--reuid={NOBODY}", f"--regid={NOBODY}", "--clear-groups"]
+    done = run_fresh(folder, state, *nobody)
+    assert done.returncode == 0, done.stderr
+    lines = done.stderr.splitlines()
+    assert lines[0].startswith("robotide: running as nobody, not root"), done.stderr
+    assert len(lines) <= 3 and "make run' as root" in done.stderr, done.stderr
+    assert not (state / "apt-get.log").exists()
