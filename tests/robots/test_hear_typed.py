@@ -43,7 +43,9 @@ def say_to_a_listener(app, text: str) -> dict:
     return wait_for(said, what=f"a listen() hearing {text!r}")
 
 
-def test_the_voice_example_hears_move_typed_to_the_sim_and_moves(appliance):
+def test_the_voice_example_hears_move_typed_to_the_sim_and_moves(any_appliance):
+    """Embedded, and split (the agent a process of its own, over Redis and PostgreSQL)."""
+    appliance = any_appliance
     program = appliance.create_program("voice", VOICE_MOVE)
     start = appliance.api("GET", "/api/robots/sim/sensors").json()["position"]
     run = appliance.run_program(program["id"])
