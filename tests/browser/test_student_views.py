@@ -13,7 +13,7 @@ import re
 import pytest
 from playwright.sync_api import Page, expect
 
-from tests.appliance import DEADLINE, Appliance
+from tests.appliance import ADMIN_PASSWORD, DEADLINE, Appliance
 from tests.browser.test_pages import sign_in
 
 PASSWORD = "user-pass-1234"
@@ -146,3 +146,16 @@ def test_a_student_sees_a_plain_sentence_and_staff_the_isolation_line(
     expect(admin.locator(".isolation")).to_contain_text(words)
     expect(admin.locator(".isolation")).to_contain_text("Programs run:")
     shot(admin, screenshot, "staff-robot-page")
+
+    # In Portuguese: said from its parts, no path translated (what the line holds depends on
+    # the machine; tests/robots/test_isolation_line.py covers each kind of line).
+    admin_pt = new_page(locale="pt-BR")
+    admin_pt.goto("/accounts/login/")
+    admin_pt.locator('input[name="username"]').fill("admin")
+    admin_pt.locator('input[name="password"]').fill(ADMIN_PASSWORD)
+    admin_pt.locator('input[name="password"]').press("Enter")
+    expect(admin_pt).not_to_have_url(re.compile("/accounts/login/"))
+    admin_pt.goto("/robots/sim/")
+    expect(admin_pt.locator(".isolation")).to_contain_text("Os programas rodam:")
+    assert "memória/" not in admin_pt.locator(".isolation").inner_text()
+    shot(admin_pt, screenshot, "staff-robot-page-pt")
