@@ -113,7 +113,7 @@ def people(appliance):
     """A student and a teacher (staff), each with a Python program of two revisions, a blocks
     program, a finished run that printed a long unbroken line, and an API token."""
     made = {}
-    for role, staff in (("student", False), ("teacher", True)):
+    for role, staff in (("student", False), ("teacher", True), ("aluno", False)):
         username = f"fit-{role}"
         token = appliance.new_user(username, PASSWORD, staff=staff)
         program = appliance.create_program(f"{UNBROKEN}{role}", "print(1)\n", token=token)
@@ -180,7 +180,7 @@ def check(page: Page, name: str, width: int, screenshot, problems: list[str]) ->
         if width in PHONES and not inside_viewport(page, estop):
             problems.append(f"{name}: the emergency stop is gone after scrolling down")
         page.evaluate("window.scrollTo(0, 0)")
-    if width in SHOT_AT:
+    if width in SHOT_AT or name.startswith("aluno"):  # and the Portuguese phone
         screenshot(page, f"fit-{name}-{width}")
 
 
@@ -190,12 +190,20 @@ def open_at(new_page, width: int) -> Page:
     return page
 
 
-@pytest.mark.parametrize("width", WIDTHS)
-@pytest.mark.parametrize("role", ["student", "teacher"])
+@pytest.mark.parametrize(
+    "role, width",
+    [(role, width) for role in ("student", "teacher") for width in WIDTHS] + [("aluno", 360)],
+)
 def test_every_page_fits(new_page, people, role, width, screenshot):
+    """Each page as a student and a teacher see it; and as a student reading Portuguese (its
+    words are longer) on the narrowest phone."""
     who = people[role]
     page = open_at(new_page, width)
     sign_in(page, who["username"], PASSWORD)
+    if role == "aluno":
+        page.locator("header.top .language-switcher select").select_option("pt-br")
+        page.locator("header.top .language-switcher button").click()
+        expect(page.locator("html")).to_have_attribute("lang", "pt-br")
     problems: list[str] = []
     for name, address, ready in pages_of(who, staff=role == "teacher"):
         page.goto(address)
@@ -206,7 +214,7 @@ def test_every_page_fits(new_page, people, role, width, screenshot):
     expect(page.locator("#bench-panel #sensors")).to_be_visible()
     page.locator(".CodeMirror").click()
     page.keyboard.press("Control+Enter")  # save and run
-    expect(page.locator("#console #run-status .state")).to_have_text("finished")
+    expect(page.locator("#console #run-status .state.finished")).to_be_visible()
     check(page, f"{role}-workbench-ran", width, screenshot, problems)
     assert not problems, "\n".join(problems)
 
