@@ -154,6 +154,7 @@ async def test_robot_page_shows_svg_only_as_an_image():
     # First what runs there now: the page may have missed a change since it was rendered.
     running = await comm.receive_from(timeout=30)
     assert 'id="robot-running"' in running and 'p</a> <span class="state starting">' in running
+    assert 'id="estop-banner"' in await comm.receive_from(timeout=30)  # no stop in force
     svg = '<svg xmlns="http://www.w3.org/2000/svg"><script>alert(1)</script></svg>'
     event = {
         "type": "robot.telemetry",
@@ -306,6 +307,7 @@ async def test_a_robot_websocket_stops_driving_once_its_user_may_no_longer(monke
     comm = communicator(RobotConsumer, "/ws/robots/sim/", alice, name="sim")
     assert (await comm.connect())[0]
     await comm.receive_from()  # the running programs
+    await comm.receive_from()  # the e-stop's banner: none in force
     await comm.send_to(text_data='{"drive": [0.5, 0]}')
     told = await asyncio.wait_for(layer.receive(agent_channel("sim")), 2)
     assert told["type"] == "robot.teleop" and told["linear"] == 0.5
