@@ -15,6 +15,8 @@
 //   text, e.g. to put it in the form's textarea that is saved.
 // - returns {workspace, save(): jsonText, load(jsonText), resize(), dispose()}; call resize()
 //   after the element changes size other than with the window.
+// The program is the top stack (as the blocks lie, Blockly's reading order): every other top
+// block is loose, greyed out with a warning and not run (the server decides so too).
 // A 4th argument, options, is passed on to Blockly.inject (e.g. {readOnly: true}).
 //
 // What runs is the Python the server makes of the JSON (programs/blocks.py): the block types,
@@ -106,7 +108,7 @@
       message0: gettext("show %1 as %2"),
       args0: [
         {type: "input_value", name: "VALUE"},
-        {type: "field_input", name: "NAME", text: "value"},
+        {type: "field_input", name: "NAME", text: gettext("value")},
       ],
       colour: ROBOT_HUE,
       tooltip: gettext("Show a number or a text under this name on the robot's page."),
@@ -130,7 +132,7 @@
       message0: gettext("send %1 on topic %2"),
       args0: [
         {type: "input_value", name: "VALUE"},
-        {type: "field_input", name: "TOPIC", text: "news"},
+        {type: "field_input", name: "TOPIC", text: gettext("news")},
       ],
       colour: MESSAGES_HUE,
       tooltip: gettext("Send this value to the programs on this robot that receive on this topic."),
@@ -139,7 +141,7 @@
       type: "robot_receive",
       message0: gettext("next message on topic %1, waiting up to %2 seconds"),
       args0: [
-        {type: "field_input", name: "TOPIC", text: "news"},
+        {type: "field_input", name: "TOPIC", text: gettext("news")},
         {type: "input_value", name: "TIMEOUT", check: "Number"},
       ],
       colour: MESSAGES_HUE,
@@ -150,7 +152,7 @@
       message0: gettext("remember %1 as %2"),
       args0: [
         {type: "input_value", name: "VALUE"},
-        {type: "field_input", name: "KEY", text: "laps"},
+        {type: "field_input", name: "KEY", text: gettext("laps")},
       ],
       colour: MESSAGES_HUE,
       tooltip: gettext("Keep this value under this name, in the memory the robot's programs share."),
@@ -158,7 +160,7 @@
     value({
       type: "robot_memory_get",
       message0: gettext("remembered %1"),
-      args0: [{type: "field_input", name: "KEY", text: "laps"}],
+      args0: [{type: "field_input", name: "KEY", text: gettext("laps")}],
       colour: MESSAGES_HUE,
       tooltip: gettext("The value kept under this name in the robot's shared memory, or null."),
     }),
@@ -187,10 +189,10 @@
         block("robot_drive", {inputs: {LINEAR: number(0.2), ANGULAR: number(0)}}),
         block("robot_stop"),
         block("robot_wait", {inputs: {SECONDS: number(1)}}),
-        block("robot_say", {inputs: {TEXT: text("hello")}}),
+        block("robot_say", {inputs: {TEXT: text(gettext("hello"))}}),
         block("robot_show", {inputs: {VALUE: {block: {type: "robot_sensor",
                                                       fields: {SENSOR: "range"}}}},
-                             fields: {NAME: "range"}}),
+                             fields: {NAME: gettext("range")}}),
       ]},
       {kind: "category", name: gettext("Sensors"), colour: SENSORS_HUE, contents: [
         block("robot_sensor", {fields: {SENSOR: "range"}}),
@@ -220,14 +222,14 @@
         block("math_round", {inputs: {NUM: number(3.1)}}),
       ]},
       {kind: "category", name: gettext("Text"), categorystyle: "text_category", contents: [
-        block("text"),
+        block("text", {fields: {TEXT: gettext("hello")}}),
         block("text_join"),
-        block("text_print", {inputs: {TEXT: text("hello")}}),
+        block("text_print", {inputs: {TEXT: text(gettext("hello"))}}),
       ]},
       {kind: "category", name: gettext("Variables"), categorystyle: "variable_category",
        custom: "VARIABLE"},
       {kind: "category", name: gettext("Messages"), colour: MESSAGES_HUE, contents: [
-        block("robot_publish", {inputs: {VALUE: text("hello")}}),
+        block("robot_publish", {inputs: {VALUE: text(gettext("hello"))}}),
         block("robot_receive", {inputs: {TIMEOUT: number(5)}}),
         block("robot_memory_set", {inputs: {VALUE: number(0)}}),
         block("robot_memory_get"),
@@ -236,6 +238,56 @@
   };
 
   Blockly.common.defineBlocksWithJsonArray(BLOCKS);
+
+  // A block a run's error came from (blocks_bench.js marks it): outlined in red.
+  Blockly.Css.register(
+    ".robotide-error-block > .blocklyPath { stroke: #c62828 !important; stroke-width: 4px !important; }");
+
+  // A warning's words in short lines: Blockly's bubble does not wrap them, and a long line
+  // runs out of a phone's workspace.
+  function wrap(text, width) {
+    return text.split("\n").map(function (paragraph) {
+      var lines = [], line = "";
+      paragraph.split(" ").forEach(function (word) {
+        if (line && (line + " " + word).length > (width || 32)) { lines.push(line); line = word; }
+        else line = line ? line + " " + word : word;
+      });
+      return lines.concat(line).join("\n");
+    }).join("\n");
+  }
+
+  // Blockly's own reason for orphans: programs/blocks.py reads it as loose too.
+  var LOOSE = "ORPHANED_BLOCK";
+  var LOOSE_WARNING = "robotide-loose";
+
+  // The program: the top stack as the blocks lie; a value block alone cannot be one.
+  function mainStack(workspace) {
+    var tops = workspace.getTopBlocks(true);
+    for (var i = 0; i < tops.length; i++) {
+      if (!tops[i].outputConnection || tops[i].getNextBlock()) return tops[i];
+    }
+    return null;
+  }
+
+  // Grey out (disable) every loose top block, as Blockly's orphan-disabling does, and enable
+  // again what is attached or has become the program. Not an undo step of its own.
+  function markLoose(workspace) {
+    var main = mainStack(workspace);
+    var undo = Blockly.Events.getRecordUndo();
+    Blockly.Events.setRecordUndo(false);
+    try {
+      workspace.getAllBlocks(false).forEach(function (block) {
+        var loose = !block.getParent() && block !== main;
+        if (block.hasDisabledReason(LOOSE) !== loose) block.setDisabledReason(loose, LOOSE);
+        // (the warning is not saved with the block: told once for each block on this page)
+        if (Boolean(block.robotideLoose) === loose || !block.setWarningText) return;
+        block.robotideLoose = loose;
+        block.setWarningText(loose ? wrap(gettext("Not attached to the program, so it does not run. The program is the top stack: attach this under it.")) : null, LOOSE_WARNING);
+      });
+    } finally {
+      Blockly.Events.setRecordUndo(undo);
+    }
+  }
 
   function save(workspace) {
     return JSON.stringify(Blockly.serialization.workspaces.save(workspace), null, 2);
@@ -271,10 +323,12 @@
       workspace.dispose();
       throw error;
     }
+    markLoose(workspace);
     var last = save(workspace);
     // Only changes to the program; the load's own events come after this and change nothing.
     workspace.addChangeListener(function (event) {
       if (event.isUiEvent || workspace.isDragging()) return;
+      markLoose(workspace);  // its own change events come back here, and change nothing more
       var now = save(workspace);
       if (now === last) return;
       last = now;
@@ -283,7 +337,7 @@
     return {
       workspace: workspace,
       save: function () { return save(workspace); },
-      load: function (text) { load(workspace, text); last = save(workspace); },
+      load: function (text) { load(workspace, text); markLoose(workspace); last = save(workspace); },
       resize: function () { Blockly.svgResize(workspace); },
       dispose: function () { workspace.dispose(); },
     };
@@ -293,5 +347,7 @@
     mount: mount,
     toolbox: TOOLBOX,
     blockTypes: BLOCKS.map(function (b) { return b.type; }),
+    mainStack: mainStack,
+    wrap: wrap,
   };
 })();

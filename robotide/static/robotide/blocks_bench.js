@@ -1,34 +1,82 @@
 // Blocks in the workbench: the Blockly workspace takes the textarea's place (the textarea keeps
 // Blockly's JSON, which is what is saved, drafted and run), and beside it the Python the
 // server makes of the blocks, read-only, refreshed as the blocks change.
+//
+// A run's error: the console's error lines name lines of that Python (data-line, found by the
+// server, programs/error_lines.py); the Python's source map (the block each line is made for,
+// sent with the Python) gives the block, which is marked (a red outline and a warning saying
+// why in plain words), and the console says the same above the output, with what Python said
+// kept under "details".
 (function () {
   "use strict";
 
   function cookie(name) { return window.robotideCookie(name); }
+
+  var ERROR_WARNING = "robotide-error";
+
+  // Python's exceptions in a beginner's words: [pattern of its message, the words].
+  function plainWords(name, message) {
+    var short = name.split(".").pop();
+    var m;
+    if (short === "ZeroDivisionError") return gettext("you divided by zero");
+    if (short === "NameError" || short === "UnboundLocalError") {
+      m = /name '([^']+)'/.exec(message);
+      if (m) return interpolate(gettext("the variable '%(name)s' has no value yet"), {name: m[1]}, true);
+      return gettext("a variable has no value yet");
+    }
+    if (short === "TypeError") return gettext("a value is of the wrong kind here: for example a text, or nothing (null), where a number goes");
+    if (short === "ValueError") return gettext("a value cannot be used here: for example a text that is not a number where a number goes");
+    if (short === "IndexError") return gettext("a list has no item at that position");
+    if (short === "KeyError") return interpolate(gettext("there is nothing called %(key)s here (for example a reading this robot does not have)"), {key: message}, true);
+    if (short === "OverflowError") return gettext("a number grew too large");
+    if (short === "MemoryError") return gettext("the program used more memory than it may");
+    if (short === "RecursionError") return gettext("the program went too deep into itself");
+    if (short === "RobotError") return interpolate(gettext("the robot could not do it (%(message)s)"), {message: message}, true);
+    if (/^(Connection\w*Error|BrokenPipeError)$/.test(short)) return gettext("the connection to the robot was lost");
+    return interpolate(gettext("Python reported an error (%(name)s)"), {name: short}, true);
+  }
+  // Not errors of the program: a stop, or an exit it chose.
+  var NOT_ERRORS = ["KeyboardInterrupt", "SystemExit"];
+  // The last line of a Python traceback: `Name: message`, or `Name` alone.
+  var EXCEPTION = /^([A-Za-z_][\w.]*)(?:: (.*))?$/;
 
   document.addEventListener("DOMContentLoaded", function () {
     var bench = document.getElementById("blocks-bench");
     var textarea = document.getElementById("source");
     if (!bench || !textarea || !window.robotideBlocks) return;
     var pane = document.getElementById("blocks-python");
+    var consoleBox = document.getElementById("console");
     var timer = null;
+    var made = {source: null, blocks: []};  // the Python's source map, and of which text
+    var asking = null;  // the request for the text as it is, while it is under way
 
     function showPython() {
       timer = null;
+      var source = textarea.value;
       var data = new FormData();
-      data.set("source", textarea.value);
-      fetch(bench.dataset.pythonUrl, {
+      data.set("source", source);
+      asking = fetch(bench.dataset.pythonUrl, {
         method: "POST", body: data, credentials: "same-origin",
         headers: { "X-CSRFToken": cookie("csrftoken") },
       }).then(function (response) { return response.json(); }).then(function (answer) {
         pane.textContent = answer.python || answer.error || "";
         pane.classList.toggle("error", !answer.python);
-      }, function () { /* offline: the next change tries again */ });
+        made = {source: source, blocks: answer.blocks || []};
+        return made;
+      }, function () { return made; /* offline: the next change tries again */ });
+      return asking;
+    }
+
+    // The source map of the text as it is (a run saves and runs it).
+    function sourceMap() {
+      if (made.source === textarea.value) return Promise.resolve(made);
+      if (timer) { clearTimeout(timer); timer = null; }
+      return showPython();
     }
 
     textarea.hidden = true;
     bench.hidden = false;
-    window.robotideBlocksEditor = window.robotideBlocks.mount(
+    var editor = window.robotideBlocksEditor = window.robotideBlocks.mount(
       document.getElementById("blocks-area"), textarea.value,
       function (json) {
         textarea.value = json;
@@ -38,5 +86,142 @@
         timer = setTimeout(showPython, 300);
       });
     showPython();
+    var workspace = editor.workspace;
+
+    // -- a run's error, marked on its block ------------------------------------------------
+
+    var marked = null;  // the block marked, and the run whose error it is
+    function unmark() {
+      if (!marked) return;
+      var block = workspace.getBlockById(marked.block);
+      if (block) {
+        block.setWarningText(null, ERROR_WARNING);
+        var svg = block.getSvgRoot && block.getSvgRoot();
+        if (svg) svg.classList.remove("robotide-error-block");
+      }
+      marked = null;
+    }
+
+    // Selected (and so focused, Blockly's keyboard then on it) and in view.
+    function showBlock(id) {
+      var block = id && workspace.getBlockById(id);
+      if (!block) return;
+      workspace.centerOnBlock(block.id);
+      Blockly.common.setSelected(block);
+    }
+
+    function mark(id, warning) {
+      var block = id && workspace.getBlockById(id);
+      if (!block) return false;
+      block.setWarningText(warning, ERROR_WARNING);
+      block.getSvgRoot().classList.add("robotide-error-block");
+      workspace.centerOnBlock(id);  // not selected: the keyboard's focus stays where it is
+      // Its words open beside it where there is room; on a phone the bubble would cover the
+      // blocks (the console says the same, and a tap on the icon opens it).
+      var icon = block.getIcon && block.getIcon(Blockly.icons.IconType.WARNING);
+      var room = document.getElementById("blocks-area").clientWidth >= 560;
+      if (icon && icon.setBubbleVisible && room) icon.setBubbleVisible(true);
+      return true;
+    }
+
+    // The block of a line of the Python: the deepest of the traceback's lines that one made
+    // (a line of a helper, e.g. turn(), is no block's: the block that called it is).
+    function blockOf(lines, map) {
+      for (var i = lines.length - 1; i >= 0; i--) {
+        var id = map.blocks[Number(lines[i].dataset.line) - 1];
+        if (id) return id;
+      }
+      return null;
+    }
+
+    // The exception's line: the first after the traceback's last frame that reads as one.
+    function exceptionAfter(line) {
+      for (var next = line.nextElementSibling; next; next = next.nextElementSibling) {
+        var m = EXCEPTION.exec(next.textContent);
+        if (m && next.classList.contains("e")) return {name: m[1], message: m[2] || "", text: next.textContent};
+      }
+      return null;
+    }
+
+    function explain(run, say, original, id) {
+      var note = run.querySelector(".blocks-error");
+      if (!note) {
+        note = document.createElement("div");
+        note.className = "blocks-error";
+        note.setAttribute("role", "alert");
+        run.insertBefore(note, run.querySelector(".console-log"));
+      }
+      note.textContent = "";
+      var words = document.createElement("p");
+      words.textContent = say;
+      note.append(words);
+      if (id) {
+        var show = document.createElement("button");
+        show.type = "button";
+        show.className = "link-button";
+        show.textContent = gettext("Show the block");
+        show.addEventListener("click", function () { showBlock(id); });
+        words.append(" ", show);
+      }
+      var details = document.createElement("details");
+      var summary = document.createElement("summary");
+      summary.textContent = gettext("What Python said");
+      var code = document.createElement("code");
+      code.textContent = original;
+      details.append(summary, code);
+      note.append(details);
+    }
+
+    function markError(run) {
+      var lines = run.querySelectorAll(".ln[data-line]");
+      if (!lines.length) return;
+      var last = lines[lines.length - 1];
+      var error = exceptionAfter(last);
+      if (!error || NOT_ERRORS.indexOf(error.name.split(".").pop()) >= 0) return;
+      var key = run.dataset.run + ":" + last.dataset.line + ":" + error.text;
+      if (run.dataset.blocksError === key) return;
+      run.dataset.blocksError = key;
+      sourceMap().then(function (map) {
+        if (run.dataset.blocksError !== key) return;
+        var id = blockOf(lines, map);
+        var why = plainWords(error.name, error.message);
+        var say = id ? interpolate(gettext("This block stopped the program: %(why)s."), {why: why}, true)
+                     : interpolate(gettext("The program stopped: %(why)s."), {why: why}, true);
+        unmark();
+        var warning = window.robotideBlocks.wrap(say + "\n\n" + gettext("What Python said:") + " " + error.text);
+        if (id && mark(id, warning)) {
+          marked = {block: id, run: run.dataset.run};
+        } else {
+          id = null;
+        }
+        explain(run, say, error.text, id);
+      });
+    }
+
+    // The console's lines naming the Python's lines become links to their blocks. This runs
+    // before workbench.js's own observer (made first: this script comes first), which leaves
+    // lines with a role alone: its links go to a text editor's lines.
+    function linkLines(run) {
+      run.querySelectorAll(".ln[data-line]:not([role])").forEach(function (element) {
+        element.setAttribute("role", "link");
+        element.tabIndex = 0;
+        element.title = gettext("Show the block this line of Python was made for");
+        function go() {
+          sourceMap().then(function (map) { showBlock(blockOf([element], map) || (marked && marked.block)); });
+        }
+        element.addEventListener("click", go);
+        element.addEventListener("keydown", function (event) { if (event.key === "Enter") go(); });
+      });
+    }
+
+    if (consoleBox) {
+      new MutationObserver(function () {
+        var run = consoleBox.querySelector("#console-run[data-run]");
+        if (!run) return;
+        if (marked && marked.run !== run.dataset.run) unmark();  // another run: its own error
+        linkLines(run);
+        markError(run);
+      }).observe(consoleBox, { childList: true, subtree: true });
+    }
   });
 })();
