@@ -353,11 +353,10 @@ def listening_socket(host: str, port: int) -> socket.socket:
     except OSError as exc:
         sock.close()
         raise SystemExit(bind_refused(host, port, exc)) from None
-    # uvicorn's own socket never gets TCP_NODELAY from asyncio: each keep-alive response would
-    # wait ~40 ms for the client's delayed ACK. Linux copies the option to accepted connections.
+    # Linux copies it to the accepted connections: uvicorn's worker processes never have asyncio
+    # set it on theirs, and each keep-alive response would wait ~40 ms for the delayed ACK.
     sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-    sock.set_inheritable(True)
-    return sock
+    return sock  # not inheritable: no program run may get the server's socket
 
 
 def bind_refused(host: str, port: int, exc: OSError) -> str:
@@ -454,6 +453,7 @@ def serve_workers(host: str, port: int, workers: int, sock: socket.socket) -> No
     config = uvicorn.Config(
         "robotide.asgi:application", host=host, port=port, workers=workers, **server_options()
     )
+    sock.set_inheritable(True)  # uvicorn's worker processes are spawned with it
     Multiprocess(config, sockets=[sock]).run()
 
 
