@@ -24,7 +24,9 @@ ERRORS = {
     "javascript": "const { Robot } = require('robot');\n"
     "(async () => { const bot = new Robot(); await bot.sensor('gps'); })();\n",
     "tcl": "package require robot\nrobot::sensor gps\n",
-    "blocks": '{"blocks": {"blocks": [{"type": "robot_sensor", "fields": {"SENSOR": "gps"}}]}}',
+    # (printed: a value block alone is loose, not run)
+    "blocks": '{"blocks": {"blocks": [{"type": "text_print", "inputs": {"TEXT": {"block": '
+    '{"type": "robot_sensor", "fields": {"SENSOR": "gps"}}}}}]}}',
 }
 UNKNOWN_METHOD = {
     "python": "import robot\nrobot.Robot().call('fly', 1)\n",
