@@ -458,3 +458,44 @@ async def test_the_portuguese_wall_turn_drives_and_says_its_heading(admitted, tm
     assert process.returncode == 0, err.decode()
     assert re.fullmatch(r"rumo: -?\d+\.\d\n", out.decode())
     assert admitted.shows["rumo"]["value"] == float(out.decode().split()[1])
+
+
+@pytest.mark.django_db(transaction=True)
+async def test_a_live_robotide_line_reaches_a_portuguese_viewer_in_portuguese(tmp_path):
+    """The run's live stream (its page, the workbench's console): a line the supervisor sends
+    as the run ends is rendered in the viewer's language, like the page's tail."""
+    from channels.db import database_sync_to_async
+    from channels.layers import get_channel_layer
+    from channels.testing import WebsocketCommunicator
+
+    from programs.consumers import RunConsumer
+    from robotide.language import WebsocketLanguage
+    from robots.bus import run_group
+
+    @database_sync_to_async
+    def a_run():
+        ana = User.objects.create_user("ana-live")
+        robot = Robot.objects.create(name="sim", url="sim://")
+        program = Program.objects.create(owner=ana, name="p", language="python")
+        run = Run.create_for(program, robot, ana)
+        run.log_path.parent.mkdir(parents=True)
+        run.log_path.write_bytes(b"o Ol\xc3\xa1\n")
+        return ana, run
+
+    ana, run = await a_run()
+    app = WebsocketLanguage(RunConsumer.as_asgi())
+    portuguese = [(b"accept-language", b"pt-BR")]
+    comm = WebsocketCommunicator(app, f"/ws/runs/{run.pk}/", headers=portuguese)
+    comm.scope["user"] = ana
+    comm.scope["url_route"] = {"kwargs": {"run_id": run.pk}}
+    assert (await comm.connect())[0]
+    await comm.receive_from(30)  # the tail
+    await comm.receive_from(30)  # the state
+    lines = [[7, "s", "[robotide] failed: exit status 1"]]  # after the 7 bytes of the tail
+    message = {"type": "run.output", "run_id": run.pk, "lines": lines, "skipped": 0}
+    await get_channel_layer().group_send(run_group(run.pk), message)
+    html = await comm.receive_from(30)
+    while "ln s" not in html:
+        html = await comm.receive_from(30)
+    assert "[robotide] falhou: código de saída 1" in html and "exit status" not in html
+    await comm.disconnect()
