@@ -22,11 +22,13 @@ HEIGHT = {360: 740, 390: 844, TABLET: 1180, 1366: 860}
 SHOT_AT = (390, TABLET, 1366)
 TOUCH = 44  # px: the smallest target a finger hits (WCAG 2.5.5, Apple's and Google's guides)
 
-# What a finger must hit: the menu, buttons, links drawn as buttons, and form fields.
+# What a finger must hit: the menu, buttons, links drawn as buttons or beside a button (Cancel),
+# summaries, and form fields (a checkbox through its label).
 TARGETS = (
-    "header.top a, header.top button, header.top select, summary, "
-    "button, a.button, input:not([type=hidden]):not([type=checkbox]):not([type=radio]), "
-    "select, textarea, label:has(> input[type=checkbox]), label:has(> input[type=radio])"
+    "header.top a, header.top button, header.top select, summary, button, a.button, "
+    ":is(form, p) > button ~ a, select, textarea, "
+    "input:not([type=hidden]):not([type=checkbox]):not([type=radio]), "
+    "label:has(> input[type=checkbox]), label:has(> input[type=radio])"
 )
 # Exceptions, on purpose: the editors' own insides (CodeMirror's hidden input, Blockly's
 # drawing) are not ours to size, and a link inside a sentence or a table cell is text, not a
