@@ -398,8 +398,7 @@ def test_robotides_lines_are_said_in_portuguese(wording):
 
 # -- the Portuguese examples read and run --------------------------------------------------------
 
-EXAMPLES_DIR = ROOT / "programs" / "examples"
-PT_EXAMPLES = EXAMPLES_DIR / "pt_BR"
+PT_EXAMPLES = ROOT / "programs" / "examples" / "pt_BR"
 # A syntax check per file kind, with the language's own tool (no program is run).
 CHECKS = {
     ".sh": ["sh", "-n"],
@@ -410,15 +409,16 @@ CHECKS = {
 }
 
 
-@pytest.mark.parametrize("example", sorted(p.name for p in PT_EXAMPLES.iterdir()))
-def test_each_portuguese_example_is_one_of_the_examples_and_reads(example):
+@pytest.mark.parametrize("example", sorted(EXAMPLES))
+def test_each_example_has_its_portuguese_one_and_it_reads(example):
     import shutil
     import subprocess
 
     from programs.languages import language_for_filename
 
-    assert example in EXAMPLES  # the same file name as its English one, which names it
+    assert {p.name for p in PT_EXAMPLES.iterdir()} <= set(EXAMPLES)  # none of its own
     path, suffix = PT_EXAMPLES / example, Path(example).suffix
+    assert path.exists()  # the same file name as its English one
     source = path.read_text()
     if suffix == ".py":
         compile(source, example, "exec")
