@@ -370,7 +370,7 @@ def test_robot_page_shows_sensors_camera_and_program_drawings(page, appliance, s
     page.get_by_role("button", name="Run").click()
     run_id = run_id_of(page)
     expect(page.locator("#log-lines .ln.o").first).to_contain_text("My heading is")
-    page.get_by_role("link", name="sim").click()
+    page.get_by_role("link", name="sim").first.click()  # the run's robot (its panel names it too)
 
     expect(page.locator("#robot-running")).to_contain_text(f"#{run_id} Compass")
     shows = page.locator("#shows")
