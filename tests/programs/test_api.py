@@ -6,6 +6,7 @@ from django.test import Client
 
 from programs.models import Program
 from robotide.models import ApiToken
+from robots.models import Robot
 
 pytestmark = pytest.mark.django_db
 
@@ -113,6 +114,10 @@ def test_only_staff_add_robots(api, alice):
 
 def test_run_on_an_unknown_robot(api):
     program = api("POST", "/api/programs", {"name": "p", "language": "python"}).json()
+    # No robot open to alice at all: she is told why, not that "ghost" is missing.
+    response = api("POST", f"/api/programs/{program['id']}/run", {"robot": "ghost"})
+    assert response.status_code == 409 and "Ask your teacher" in response.json()["detail"]
+    Robot.objects.create(name="arm", url="sim://")  # open to everyone
     response = api("POST", f"/api/programs/{program['id']}/run", {"robot": "ghost"})
     assert response.status_code == 404 and "ghost" in response.json()["detail"]
 

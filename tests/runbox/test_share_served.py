@@ -82,12 +82,15 @@ def test_the_server_and_agent_are_spared_and_runs_live_in_the_limited_parent(app
     )
     isolation = {r["name"]: r for r in app.api("GET", "/api/robots").json()}["sim"]["isolation"]
     assert isolation.endswith(f"freezer); {said}"), isolation
-    client = app.session()
-    assert said in html.unescape(client.get("/robots/sim/").text)
+    client = app.session()  # the robot page says it in words (robots.isolation_words)
+    assert (
+        f"all runs together at most {limit_mb} MB of memory and 2048 processes,"
+        " CPU weight 40 (the server's: 100)"
+    ) in html.unescape(client.get("/robots/sim/").text)
     portuguese = client.get("/robots/sim/", headers={"Accept-Language": "pt-BR"}).text
     assert (
-        f"todas as execuções juntas no máximo {limit_mb} MB de memória e 2048 processos,"
-        " peso de CPU 40 (o do servidor 100)"
+        f"todas as execuções juntas com no máximo {limit_mb} MB de memória e 2048 processos,"
+        " peso de CPU 40 (o do servidor: 100)"
     ) in html.unescape(portuguese)
 
     program = app.create_program("probe share", PROBE)
