@@ -4,6 +4,7 @@ works without scripts and for a program edited since), and the robot beside the 
 the run goes on (the workbench's robot panel)."""
 
 from django.http import Http404
+from django.urls import reverse
 
 from programs.runlog import places_in, read_for_page, render_lines
 from robots.models import get_robot_for_user
@@ -32,15 +33,29 @@ def line_link(count: int):
 
 
 def robot_view(request, run) -> dict:
-    """The robot's live view (camera or the sim's drawing, readings, shown values) while the
-    run is not over; an ended run's page shows its output alone. Nothing for a viewer who may
-    see the run but not the robot (a teacher's student's run on another class's robot)."""
+    """Whether the page shows the robot (camera or the sim's drawing, readings, shown values):
+    while the run is not over, to a viewer who may see the robot (not a teacher's student's
+    run on another class's robot). The panel itself is fetched once the page is shown
+    (robot_panel_context): the run's page never waits for the robot's agent."""
+    robot = _robot_seen(request, run)
+    return {} if robot is None else {"robot_view": True, "robot": robot}
+
+
+def robot_panel_context(request, run) -> dict | None:
+    """The run page's robot panel (programs/_panel.html), asked of the robot's agent; None
+    once the run is over or for a viewer who may not see the robot."""
+    robot = _robot_seen(request, run)
+    if robot is None:
+        return None
+    # say_next: the panel's "Say to the robot" form comes back to the run's page without scripts.
+    say_next = reverse("run-detail", args=[run.pk])
+    return {"say_next": say_next, **robot_state_context(robot, request.user)}
+
+
+def _robot_seen(request, run):
     if not run.ongoing:
-        return {}
+        return None
     try:
-        robot = get_robot_for_user(request.user, run.robot.name)
+        return get_robot_for_user(request.user, run.robot.name)
     except Http404:
-        return {}
-    # say_next: the panel's "Say to the robot" form comes back here without scripts.
-    state = robot_state_context(robot, request.user)
-    return {"robot_view": True, "say_next": request.path, **state}
+        return None

@@ -30,7 +30,7 @@ from programs.languages import (
     get_language,
 )
 from programs.models import Program, Run, Share
-from programs.run_page import run_page_context
+from programs.run_page import robot_panel_context, run_page_context
 from programs.runlog import download
 from programs.shares import ShareError, add_share
 from robots import run_queue
@@ -410,6 +410,16 @@ def run_tables_context(user, robot: str | None) -> dict:
 def run_detail(request: HttpRequest, run_id: int) -> HttpResponse:
     run = get_run_for_user(request.user, run_id)
     return render(request, "runs/detail.html", run_page_context(request, run))
+
+
+@login_required
+def run_robot(request: HttpRequest, run_id: int) -> HttpResponse:
+    """The robot beside a run's output, fetched by its page once shown; nothing (204) once the
+    run is over or for a viewer who may not see the robot."""
+    context = robot_panel_context(request, get_run_for_user(request.user, run_id))
+    if context is None:
+        return HttpResponse(status=204)
+    return render(request, "programs/_panel.html", context)
 
 
 @login_required

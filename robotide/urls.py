@@ -66,6 +66,7 @@ urlpatterns = [
     path("pages/", include("django.contrib.flatpages.urls")),
     path("runs/", programs.run_list, name="run-list"),
     path("runs/<int:run_id>/", programs.run_detail, name="run-detail"),
+    path("runs/<int:run_id>/robot", programs.run_robot, name="run-robot"),
     path("runs/<int:run_id>/log", programs.run_log, name="run-log"),
     path("runs/<int:run_id>/stop", programs.run_stop, name="run-stop"),
     path("robots/", robots.robot_list, name="robot-list"),

@@ -168,3 +168,24 @@ def test_program_names_and_output_are_escaped(client, alice, settings, tmp_path)
     page = client.get(f"/runs/{run.pk}/").content.decode()
     assert "<script>alert(1)</script>" not in page and "&lt;script&gt;" in page
     assert "<b>bold</b>" not in page
+
+
+def test_a_running_runs_page_does_not_wait_for_the_robots_agent(
+    client, alice, program, monkeypatch
+):
+    """The robot beside the output is fetched once the page is shown: the page itself never
+    asks the agent (1 s each time it is away, every 2 s a page without scripts reloads)."""
+    robot = Robot.objects.create(name="arm", url="sim://")
+    run = Run.create_for(program, robot, alice)
+
+    def asked(*args, **kwargs):
+        raise AssertionError("the run's page asked the robot's agent")
+
+    monkeypatch.setattr("robots.views.ask_agent_sync", asked)
+    page = client.get(f"/runs/{run.pk}/").content.decode()
+    assert f'hx-get="/runs/{run.pk}/robot"' in page
+    monkeypatch.undo()
+    panel = client.get(f"/runs/{run.pk}/robot")  # no agent here: the panel says so
+    assert panel.status_code == 200 and 'id="bench-robot"' in panel.content.decode()
+    Run.objects.filter(pk=run.pk).update(state=Run.State.FINISHED)
+    assert client.get(f"/runs/{run.pk}/robot").status_code == 204
