@@ -19,6 +19,16 @@ settings.load_profile("robotide")
 pytest_plugins = ["tests.robot_api_server"]
 
 
+@pytest.fixture
+def keep_umask():
+    """robotide.cli.main() tightens the process' umask for what the server writes: put back
+    for the other tests."""
+    umask = os.umask(0o022)
+    os.umask(umask)
+    yield
+    os.umask(umask)
+
+
 @pytest.fixture(autouse=True)
 def _test_settings(settings, tmp_path):
     # A data folder of its own: what the agent names after it (its runs' accounts, its

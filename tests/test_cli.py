@@ -22,6 +22,8 @@ from tests.appliance import (
     wait_for,
 )
 
+pytestmark = pytest.mark.usefixtures("keep_umask")
+
 
 def start(data_dir, port, **env):
     environ = {k: v for k, v in os.environ.items() if k not in ("REDIS_URL", "DATABASE_URL")}
@@ -145,15 +147,6 @@ def signed_in(username: str, password: str) -> bool:
     client = Client()
     page = client.post("/accounts/login/", {"username": username, "password": password})
     return page.status_code == 302 and "_auth_user_id" in client.session
-
-
-@pytest.fixture(autouse=True)
-def _keep_umask():
-    # main() tightens the process' umask for what the server writes; not for the other tests.
-    umask = os.umask(0o022)
-    os.umask(umask)
-    yield
-    os.umask(umask)
 
 
 def test_the_server_raises_its_open_files_limit_to_what_the_system_allows():

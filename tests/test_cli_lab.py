@@ -20,16 +20,7 @@ from programs.models import Program
 from robotide.cli import main
 from tests.appliance import ROBOTIDE
 
-pytestmark = pytest.mark.django_db
-
-
-@pytest.fixture(autouse=True)
-def _keep_umask():
-    # main() tightens the process' umask for what the server writes; not for the other tests.
-    umask = os.umask(0o022)
-    os.umask(umask)
-    yield
-    os.umask(umask)
+pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("keep_umask")]
 
 
 @pytest.fixture
