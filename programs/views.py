@@ -7,7 +7,7 @@ from django.core.exceptions import PermissionDenied, ValidationError
 from django.db.models import Exists, OuterRef
 from django.http import HttpRequest, HttpResponse
 from django.shortcuts import get_object_or_404, redirect, render
-from django.utils.http import content_disposition_header, url_has_allowed_host_and_scheme
+from django.utils.http import content_disposition_header
 from django.utils.translation import gettext as _
 from django.utils.translation import ngettext
 from django.views.decorators.http import require_POST
@@ -33,6 +33,7 @@ from programs.models import Program, Run, Share
 from programs.run_page import robot_panel_context, run_page_context
 from programs.runlog import download
 from programs.shares import ShareError, add_share
+from robotide.redirects import back
 from robots import run_queue
 from robots.availability import no_robot_reason, robot_to_run_on
 from robots.models import robots_for_user
@@ -449,10 +450,7 @@ def run_stop(request: HttpRequest, run_id: int) -> HttpResponse:
         cancelled = queued and run.state == Run.State.STOPPED
         said = _("Cancelled run %(id)s.") if cancelled else _("Stopping run %(id)s.")
         messages.info(request, said % {"id": run.pk})
-    next_url = request.POST.get("next", "")
-    if url_has_allowed_host_and_scheme(next_url, allowed_hosts={request.get_host()}):
-        return redirect(next_url)
-    return redirect("run-detail", run.pk)
+    return back(request, "run-detail", run.pk)
 
 
 @login_required

@@ -14,12 +14,12 @@ from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.core.exceptions import PermissionDenied
 from django.http import HttpRequest, HttpResponse
-from django.shortcuts import redirect, render
+from django.shortcuts import render
 from django.template.loader import render_to_string
-from django.utils.http import url_has_allowed_host_and_scheme
 from django.utils.translation import gettext as _
 from django.views.decorators.http import require_http_methods
 
+from robotide.redirects import back
 from robots.bus import AgentUnavailable, ask_agent, ask_agent_sync, blocking
 from robots.models import get_robot_for_user
 from robots.typed_speech import KEEP_SECONDS, MAX_CHARS, MAX_WAITING
@@ -97,10 +97,7 @@ def robot_say(request: HttpRequest, name: str) -> HttpResponse:
         messages.error(request, str(exc))
     else:
         messages.info(request, outcome(text, listening))
-    next_url = request.POST.get("next", "")
-    if url_has_allowed_host_and_scheme(next_url, allowed_hosts={request.get_host()}):
-        return redirect(next_url)
-    return redirect("robot-detail", robot.name)
+    return back(request, "robot-detail", robot.name)
 
 
 def _last_heard(robot) -> dict | None:

@@ -6,13 +6,13 @@ from django.contrib.auth.decorators import login_required
 from django.core.exceptions import PermissionDenied
 from django.http import Http404, HttpRequest, HttpResponse
 from django.shortcuts import get_object_or_404, redirect, render
-from django.utils.http import url_has_allowed_host_and_scheme
 from django.utils.translation import gettext as _
 from django.utils.translation import ngettext
 from django.views.decorators.http import require_POST
 
 from programs.access import get_program_for_user, programs_for_user, runs_for_user
 from programs.models import Run, in_line
+from robotide.redirects import back
 from robotide.security import plain_number
 from robots import disclosure, fair_shares, gateway_views, run_queue, stops
 from robots.availability import no_robot_reason
@@ -158,10 +158,7 @@ def _queue_outcome(request, robot, info: str = "", error: str = "") -> HttpRespo
         messages.error(request, error)
     else:
         messages.info(request, info)
-    next_url = request.POST.get("next", "")
-    if url_has_allowed_host_and_scheme(next_url, allowed_hosts={request.get_host()}):
-        return redirect(next_url)
-    return redirect("robot-detail", robot.name)
+    return back(request, "robot-detail", robot.name)
 
 
 def _number(value) -> int | None:
