@@ -150,6 +150,7 @@ def pages_of(who: dict, staff: bool) -> list[tuple[str, str, str]]:
         ("workbench-blocks", f"/programs/{blocks}/", "#blocks-area .blocklySvg"),
         ("revisions", f"/programs/{program}/revisions/", "h1"),
         ("compare", f"/programs/{program}/revisions/1/", "pre.diff"),
+        ("current-revision", f"/programs/{program}/revisions/2/", "p.empty"),
         ("delete", f"/programs/{program}/delete", "h1"),
         ("languages", "/languages/", "h1"),
         ("robot-api", "/help/robot-api/", "h1"),
