@@ -269,7 +269,11 @@ async def test_a_program_is_killed_when_its_agent_dies(tmp_path):
     parent = await asyncio.create_subprocess_exec(
         sys.executable, "-c", code, stdout=asyncio.subprocess.PIPE
     )
-    child = int(await parent.stdout.readline())
+    # The program shares its parent's stdout: its "ready" may come before the parent's pid.
+    line = await parent.stdout.readline()
+    while not line.strip().isdigit():
+        line = await parent.stdout.readline()
+    child = int(line)
     assert await parent.stdout.readline() == b"ready\n"  # the program shares its stdout
     assert pid_alive(child)
     parent.kill()
