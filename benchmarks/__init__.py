@@ -22,4 +22,5 @@ BENCHMARKS = (
     "gateway",
     "fleet",
     "classroom",
+    "sims",
 )
