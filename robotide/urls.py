@@ -91,6 +91,7 @@ urlpatterns = [
     path("robots/<slug:name>/queue/resume", robots.robot_queue_resume, name="robot-queue-resume"),
     path("robots/<slug:name>/say", robot_say.robot_say, name="robot-say"),
     path("robots/<slug:name>/camera.jpg", robots.robot_camera, name="robot-camera"),
+    path("robots/<slug:name>/world.json", robots.robot_world, name="robot-world"),
     path("robots/<slug:name>/gateway", gateway_views.robot_gateway, name="robot-gateway"),
     path(
         "robots/<slug:name>/gateway/endpoints",

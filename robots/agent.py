@@ -44,6 +44,7 @@ from robots.models import Robot, RobotStop, agent_channel, manager_channel, robo
 from robots.readings import age_shows
 from robots.robot_api import RobotApi
 from robots.run_queue import RunQueue
+from robots.sim_view import PoseStream, sim_info
 from runbox import SYSTEM_PATH, cgroups, launcher, seccomp
 from runbox.ahead import Ahead, discard
 from runbox.box import Launch, Listener, make_box
@@ -173,6 +174,8 @@ class RobotAgent:
         self._shutting_down = False
         self.handlers.update(self.queue.handlers)
         self.handlers.update(self.api.host.handlers)  # robot.hear: the "Say to the robot" box
+        self.poses = PoseStream(self)  # a sim's pose for pages that draw it (robot.world)
+        self.handlers.update(self.poses.handlers)
         self.lent_to: str | None = None  # a serial bridge client has the robot's device
         self._driver_back = asyncio.Event()  # set while the driver has its device
         self._outbox: asyncio.Queue = asyncio.Queue()
@@ -220,6 +223,7 @@ class RobotAgent:
             asyncio.create_task(self._receive_loop(), name=f"{self.name}-receive"),
             asyncio.create_task(self._publish_loop(), name=f"{self.name}-publish"),
             asyncio.create_task(self._telemetry_loop(), name=f"{self.name}-telemetry"),
+            asyncio.create_task(self.poses.serve(), name=f"{self.name}-poses"),
             asyncio.create_task(self._keep_robot_open(), name=f"{self.name}-link"),
             asyncio.create_task(self._heartbeat_loop(), name=f"{self.name}-heartbeat"),
             asyncio.create_task(self.queue.serve(), name=f"{self.name}-queue"),
@@ -415,6 +419,7 @@ class RobotAgent:
             state = {"sensors": await self.readings(), "units": self.units, "camera": camera}
             state["drive"] = capabilities["drive"]
             state["model"] = capabilities.get("model")  # a driver's robot model, if it has one
+            state["sim"] = sim_info(self.driver)  # pages draw a sim themselves
             state["lease"] = self.lease.holder.as_dict() if self.lease.holder else None
             state["heard"] = self.api.host.last_heard  # what the last listen() heard
             await self.reply(message, {**state, "shows": self.shows})
@@ -769,6 +774,7 @@ class RobotAgent:
         self.take_lease(holder)
         estops = self.estops
         applied = await self.driver.drive(linear, angular)
+        self.poses.wake()
         if self.estops != estops:
             with contextlib.suppress(rhal.RhalError):
                 await self.driver.stop()
@@ -852,6 +858,7 @@ class RobotAgent:
         """Latest-state snapshots, throttled at the source; all shown values once a second."""
         for tick in itertools.count():
             sensors = await self.readings()
+            self.poses.noticed(sensors)
             self._age_shows()
             changed, self.api.changed_shows = self.api.changed_shows, {}
             full = self._shows_snapshot_due or tick % SHOWS_SNAPSHOT_EVERY == 0

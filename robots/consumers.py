@@ -45,6 +45,9 @@ def parse_control(text: str | None) -> tuple[str, tuple[float, float] | None] | 
     return None
 
 
+# robot.pose's fields a page's canvas draws from (robots.sim_view).
+POSE = frozenset(("x", "y", "theta", "linear", "angular", "bumper", "range", "sonar", "t"))
+
 # How long a connection's access stands before it is read again (the robot's classes, who may
 # drive it): at the next command or telemetry after that.
 ACCESS_RECHECK_SECONDS = ACCESS_STANDS_SECONDS
@@ -176,6 +179,15 @@ class RobotConsumer(SayOnSocket, DirectDispatch, AsyncWebsocketConsumer):
             event, shows_changed, shown
         )
         await self.send(html)
+
+    async def robot_pose(self, event):
+        """A sim's pose (robots.sim_view), up to 20 times a second while it moves: passed on
+        as a small JSON frame that the page's canvas reads (static/robotide/simview.js), not
+        HTML: the browser draws it."""
+        if not await self.still_allowed():
+            return
+        pose = {k: v for k, v in event.items() if k in POSE}
+        await self.send(json.dumps({"pose": pose}, separators=(",", ":")))
 
     async def _shows_seen(self) -> dict:
         """The shown values this viewer sees: ended runs' only if they may see the run."""

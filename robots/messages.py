@@ -140,6 +140,8 @@ SCHEMAS: dict[str, dict[str, tuple[Callable, bool]]] = {
     "robot.release": {"owner": (_channel, REQUIRED)},
     "robot.take_control": {"owner": (_channel, REQUIRED), "user": (_text(), REQUIRED)},
     "robot.reconfigure": {},
+    # robots.sim_view (PoseStream.handlers): a sim's world, for pages that draw it
+    "robot.world": {},
     # robots.host_services (HostServices.handlers): a phrase typed for listen()
     "robot.hear": {
         "text": (_text(MAX_SAY), REQUIRED),

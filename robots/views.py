@@ -4,7 +4,7 @@ from django.contrib import messages
 from django.contrib.admin.views.decorators import staff_member_required
 from django.contrib.auth.decorators import login_required
 from django.core.exceptions import PermissionDenied
-from django.http import Http404, HttpRequest, HttpResponse
+from django.http import Http404, HttpRequest, HttpResponse, JsonResponse
 from django.shortcuts import get_object_or_404, redirect, render
 from django.utils.translation import gettext as _
 from django.utils.translation import ngettext
@@ -75,6 +75,8 @@ def robot_state_context(robot, user) -> dict:
         **status(state["sensors"], state["units"]),
         "rows": sensor_rows(state["sensors"], state["units"]),
         "camera": has_camera(robot, state),
+        # A sim is drawn by the page itself (simview.js); its JPEG only without scripts.
+        "sim": state.get("sim"),
         "holder": state["lease"],
         "drive": state["drive"],
         "model": state.get("model"),
@@ -315,6 +317,21 @@ def robot_run(request: HttpRequest, name: str) -> HttpResponse:
         messages.error(request, str(exc))
         return redirect("robot-detail", robot.name)
     return redirect("run-detail", run.pk)
+
+
+@login_required
+def robot_world(request: HttpRequest, name: str) -> HttpResponse:
+    """A sim's world, its robot and its time scale, for the page that draws it
+    (static/robotide/simview.js; robots.sim_view): to whoever may see the robot."""
+    robot = get_robot_for_user(request.user, name)
+    try:
+        answer = ask_agent_sync(robot.name, "robot.world", timeout=SNAPSHOT_TIMEOUT)
+    except AgentUnavailable as exc:  # away, or no sim (a real robot has no world)
+        return JsonResponse({"error": str(exc)}, status=503)
+    answer.pop("type", None)
+    response = JsonResponse(answer)
+    response["Cache-Control"] = "no-store"
+    return response
 
 
 @login_required

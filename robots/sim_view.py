@@ -1,0 +1,201 @@
+"""What a browser needs to draw a simulated robot itself: its pose stream and its world.
+
+Agent side of the sim view (static/robotide/simview.js draws it). Instead of a JPEG rendered
+per frame, a sim's agent publishes ``robot.pose`` to the robot's group at up to POSE_RATE Hz
+while the robot moves, and once when it stops or is put somewhere else (a reset): a page draws
+at its display's rate, extrapolating along the arc of the last pose's speeds. A still robot
+costs nothing: the loop sleeps until a drive command wakes it, or the telemetry loop (which
+reads the sensors anyway) sees the pose differ from the last one sent.
+
+``robot.world {reply_to}`` answers ``{world, robot, speed}``: the world document the sim runs
+in, its robot's shape and sensors, and its time scale (GET /robots/<name>/world.json).
+"""
+
+import asyncio
+import logging
+import math
+
+import rhal
+
+log = logging.getLogger(__name__)
+
+POSE_RATE = 20.0  # Hz, at most, while the robot moves
+DIGITS = 4  # 0.1 mm, 0.1 mrad: plenty for a picture, short on the wire
+
+
+def is_sim(driver) -> bool:
+    return getattr(driver, "kind", "") == "sim"
+
+
+def sim_info(driver) -> dict | None:
+    """For the robot.state reply: the sim's world name and time scale; None for a real robot."""
+    if not is_sim(driver):
+        return None
+    sim = driver.capabilities().get("sim") or {}
+    world = sim.get("world") or getattr(driver, "arena_name", "") or ""
+    return {"world": world, "speed": sim.get("speed", getattr(driver, "speed", 1)) or 1}
+
+
+def pose_of(readings: dict) -> tuple | None:
+    """What a page draws from a reading: x, y, theta, linear, angular, bumper, range, sonar;
+    None for a reading without a position (an error)."""
+    position, velocity = readings.get("position"), readings.get("velocity") or {}
+    if not isinstance(position, dict):
+        return None
+    sonar = readings.get("sonar")
+    return (
+        round(position["x"], DIGITS),
+        round(position["y"], DIGITS),
+        round(position["theta"], DIGITS),
+        round(velocity.get("linear", 0.0), DIGITS),
+        round(velocity.get("angular", 0.0), DIGITS),
+        bool(readings.get("bumper")),
+        _metres(readings.get("range")),
+        tuple(_metres(r) for r in sonar) if isinstance(sonar, list) else None,
+    )
+
+
+def _metres(value) -> float | None:
+    return round(value, DIGITS) if isinstance(value, (int, float)) else None
+
+
+def pose_fields(pose: tuple) -> dict:
+    """A read pose (pose_of's and the sim's clock) as robot.pose names its fields."""
+    x, y, theta, linear, angular, bumper, range_m, sonar, t = pose
+    fields = {
+        "x": x, "y": y, "theta": theta, "linear": linear, "angular": angular,
+        "bumper": bumper, "range": range_m,
+        "t": round(t, DIGITS) if isinstance(t, (int, float)) else None,
+    }  # fmt: skip
+    if sonar is not None:
+        fields["sonar"] = list(sonar)
+    return fields
+
+
+def moving(pose: tuple) -> bool:
+    return pose[3] != 0.0 or pose[4] != 0.0
+
+
+class PoseStream:
+    """One per agent; serves while the agent does, publishing only for a sim driver."""
+
+    def __init__(self, agent):
+        self.agent = agent
+        self.last: tuple | None = None  # the last pose sent
+        self._wake = asyncio.Event()
+        self.handlers = {"robot.world": self.world}
+
+    def wake(self) -> None:
+        """A drive command, a stop or a reset went to the robot: look at its pose now."""
+        self._wake.set()
+
+    def noticed(self, readings: dict) -> None:
+        """The telemetry loop's reading: wakes the stream if the robot is not where it was
+        last sent (put elsewhere by something that did not wake it, e.g. a reset)."""
+        if is_sim(self.agent.driver) and not self._wake.is_set():
+            pose = pose_of(readings)
+            if pose is not None and (self.last is None or pose[:3] != self.last[:3]):
+                self._wake.set()
+
+    async def serve(self) -> None:
+        interval = 1.0 / POSE_RATE
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            if not is_sim(self.agent.driver):
+                continue
+            before = None  # the last read of this wake's
+            while True:
+                pose = await self._read()
+                if pose is None:
+                    break
+                if before is not None and pose[:3] == before[:3]:
+                    # Commanded but not moving (pressing on a wall): a page that extrapolated
+                    # the command would draw the robot going into it.
+                    pose = pose[:3] + (0.0, 0.0) + pose[5:]
+                before = pose
+                if pose[:-1] != self.last:
+                    self._publish(pose)
+                if not moving(pose):
+                    break
+                await asyncio.sleep(interval)
+
+    async def _read(self) -> tuple | None:
+        """The pose now and the sim's clock; None while the robot cannot be read."""
+        try:
+            readings = await self.agent.driver.sensors()
+        except rhal.RhalError:
+            return None
+        pose = pose_of(readings)
+        return None if pose is None else pose + (readings.get("time"),)
+
+    def _publish(self, pose: tuple) -> None:
+        self.last = pose[:-1]
+        message = {"type": "robot.pose", "robot": self.agent.name, **pose_fields(pose)}
+        self.agent.publish(self.agent.group, message)
+
+    async def world(self, message: dict) -> None:
+        driver = self.agent.driver
+        if not is_sim(driver):
+            await self.agent.reply(message, {"error": f"robot {self.agent.name} is no sim"})
+            return
+        answer = {"world": world_doc(driver), "robot": robot_doc(driver)}
+        answer["speed"] = sim_info(driver)["speed"]
+        # Where it is now: a page draws it at once, still or not, then follows robot.pose.
+        pose = await self._read()
+        if pose is not None:
+            answer["pose"] = pose_fields(pose)
+        await self.agent.reply(message, answer)
+
+
+def world_doc(driver) -> dict:
+    """The sim's world document (rhal.sim's world_doc(); for a sim of before it, its arena
+    written as one)."""
+    if hasattr(driver, "world_doc"):
+        return driver.world_doc()
+    arena = driver._arena
+    return {
+        "format": 1,
+        "name": driver.arena_name,
+        "title": driver.arena_name,
+        "size": {"width": 2 * arena.half_width, "height": 2 * arena.half_height},
+        "walls": [],
+        "boxes": [
+            {
+                "x": (b.west + b.east) / 2,
+                "y": (b.south + b.north) / 2,
+                "width": b.east - b.west,
+                "height": b.north - b.south,
+                "angle": 0.0,
+            }
+            for b in arena.boxes
+        ],  # fmt: skip
+        "landmarks": [
+            {
+                "text": m.text,
+                "x": m.x,
+                "y": m.y,
+                "facing": m.facing,
+                "size": m.size,
+                "height": m.height,
+            }
+            for m in arena.landmarks
+        ],  # fmt: skip
+        "lines": [],
+        "zones": [],
+        "start": [{"x": 0.0, "y": 0.0, "theta": math.pi / 2}],
+    }
+
+
+def robot_doc(driver) -> dict:
+    """The sim robot's shape and sensors, as the browser draws them."""
+    if hasattr(driver, "robot_doc"):
+        return driver.robot_doc()
+    from rhal.sim import MAX_RANGE, ROBOT_RADIUS
+
+    return {
+        "radius": ROBOT_RADIUS,
+        "range": {"cone_deg": 0, "rays": 1, "min": 0.0, "max": MAX_RANGE},
+        "sonar": [],
+        "floor_sensor": False,
+    }
