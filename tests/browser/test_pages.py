@@ -356,9 +356,9 @@ def test_robot_page_shows_sensors_camera_and_program_drawings(page, appliance, s
     sensors = page.locator("#sensors")
     expect(sensors.locator("th", has_text=re.compile(r"^heading$"))).to_be_visible()
     expect(sensors.locator("th", has_text=re.compile(r"^range$"))).to_be_visible()
-    # The live camera: an MJPEG stream in a plain <img>.
-    expect(page.locator("#camera")).to_have_attribute("src", "/robots/sim/camera.mjpg")
-    page.wait_for_function("() => document.getElementById('camera').naturalWidth === 320")
+    # The sim drawn by the page itself (its JPEG stream is for pages without scripts).
+    expect(page.locator("canvas.simview-canvas")).to_be_visible()
+    expect(page.locator("canvas.simview-canvas")).to_have_attribute("data-pose", re.compile(r"\S"))
     expect(page.locator("#shows .show")).to_have_count(0)
 
     compass = next(

@@ -110,11 +110,10 @@ def test_the_run_page_shows_the_robot_beside_the_output(appliance, new_page, run
     page = signed_in(new_page)
     page.set_viewport_size({"width": 1366, "height": 900})
     page.goto(f"/runs/{run}/")
-    view = page.locator(".run-robot img.camera")
-    expect(view).to_have_attribute("src", "/robots/sim/camera.mjpg")
+    view = page.locator(".run-robot canvas.simview-canvas")
     view.scroll_into_view_if_needed()
-    # The panel is fetched once the page is shown; its picture comes then.
-    page.wait_for_function("() => document.querySelector('.run-robot img.camera').naturalWidth > 0")
+    # The panel is fetched once the page is shown; its drawing of the sim comes then.
+    expect(view).to_have_attribute("data-pose", re.compile(r"\S"))
     log, robot = page.locator("#log").bounding_box(), view.bounding_box()
     assert robot["x"] >= log["x"] + log["width"], "the robot's view is beside the output"
     screenshot(page, "run-page-1366")

@@ -61,10 +61,10 @@ def test_type_ctrl_enter_and_watch_the_output_and_the_robot(bench, appliance, sc
     page.keyboard.press("Control+End")
     page.keyboard.type('print("typed")')
     expect(page.locator("#save-state")).to_have_text("Unsaved changes")
-    camera = page.locator("#bench-panel img.camera")
-    expect(camera).to_be_visible()  # the sim's view
-    page.wait_for_timeout(500)  # a frame or two
-    before = camera.screenshot()
+    camera = page.locator("#bench-panel canvas.simview-canvas")
+    expect(camera).to_be_visible()  # the sim, drawn by the page
+    expect(camera).to_have_attribute("data-pose", re.compile(r"\S"))
+    before = camera.get_attribute("data-pose")
     page.keyboard.press("Control+Enter")
     console = page.locator("#console")
     expect(console.locator("#log-lines .ln.o")).to_have_text(
@@ -75,8 +75,7 @@ def test_type_ctrl_enter_and_watch_the_output_and_the_robot(bench, appliance, sc
     # It came over the console's websocket, open before Run: no connection of its own.
     assert console.locator("#console-run").get_attribute("ws-connect") is None
     expect(page.locator("#save-state")).to_contain_text("Saved (revision 2)")
-    page.wait_for_timeout(500)
-    assert camera.screenshot() != before, "the robot turned, and its view with it"
+    expect(camera).not_to_have_attribute("data-pose", before)  # it turned, and its drawing
     assert_not_reloaded(page)
     screenshot(page, "workbench-finished")
     run_link = console.get_by_role("link", name=re.compile(r"Run #\d+"))

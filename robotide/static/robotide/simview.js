@@ -85,6 +85,7 @@
         if (answer.pose && (!view.pose || view.at < asked)) view.received(answer.pose);
         var size = view.world.size;
         view.canvas.style.aspectRatio = size.width + " / " + size.height;
+        view.canvas.style.setProperty("--simview-ratio", size.width / size.height);
         view.resized();
       })
       .catch(function (error) {
@@ -286,10 +287,12 @@
       ctx.fillStyle = "#111111";
       ctx.fillRect(-2, -size / 2, 4, size);
       ctx.restore();
-      var into = font * 1.1 + 4;
       ctx.fillStyle = COLOURS.text;
       ctx.font = "bold " + font + "px system-ui, sans-serif";
-      ctx.fillText(mark.text, X(mark.x) + Math.cos(mark.facing) * into, Y(mark.y) - Math.sin(mark.facing) * into);
+      // Clear of its wall whichever way it faces: half the label's extent that way, and a gap.
+      var c = Math.cos(mark.facing), n = Math.sin(mark.facing);
+      var into = (Math.abs(c) * ctx.measureText(mark.text).width + Math.abs(n) * font) / 2 + 5;
+      ctx.fillText(mark.text, X(mark.x) + c * into, Y(mark.y) - n * into);
     });
     return layer;
   };
