@@ -20,6 +20,7 @@ from robots.bridges_api import bridges_router
 from robots.bus import AgentUnavailable
 from robots.gateway_api import gateway_router
 from robots.runs import AgentUnreachable, RunRefused
+from worlds.api import worlds_router
 
 
 class BearerToken(HttpBearer):
@@ -100,6 +101,7 @@ api.add_router("/robots", bridges_router)
 api.add_router("/programs", shares_router)
 api.add_router("/groups", groups_router)
 api.add_router("/tokens", tokens_router)
+api.add_router("/worlds", worlds_router)
 
 
 @api.exception_handler(Http404)

@@ -96,6 +96,7 @@ INSTALLED_APPS = [
     "robots",
     "programs",
     "runlogs",
+    "worlds",
 ]
 
 MIDDLEWARE = [

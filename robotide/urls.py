@@ -60,6 +60,7 @@ urlpatterns = [
         programs.program_unshare,
         name="program-unshare",
     ),
+    path("worlds/", include("worlds.urls")),
     path("languages/", programs.language_list, name="language-list"),
     path("help/robot-api/", api_help.robot_api_page, name="robot-api-page"),
     path("help/robot-api/<slug:language>.json", api_help.robot_api_help, name="robot-api-help"),
