@@ -54,6 +54,7 @@ from runbox.share import Share, release_parent, runs_cgroups
 from runbox.supervisor import RunProcess
 from runbox.watch import RunWatch, signal_account
 from runlogs.writer import QuotaRunProcess
+from worlds.resolve import driver_options as world_driver_options
 
 log = logging.getLogger(__name__)
 
@@ -150,6 +151,7 @@ class RobotAgent:
         self.cgroup_prefix = f"{instance:08x}-{name}."
         self.driver: rhal.Robot | None = None
         self.link_error: str | None = None
+        self.world_error: rhal.RhalError | None = None  # its sim's world not to be had
         self.api = RobotApi(self)
         # A short private folder: Unix socket paths are limited to 107 bytes.
         self.socket_dir = Path(tempfile.mkdtemp(prefix="robotide-"))
@@ -199,7 +201,7 @@ class RobotAgent:
 
     async def start(self) -> None:
         robot = await self._load_robot()
-        self.driver = rhal.connect(robot.url, **robot.driver_options())
+        self.driver, self.world_error = await self._connect(robot)
         await self.gateway.attach(self.driver)
         await self.open_robot()
         self.units = flat_units(self.driver.capabilities().get("sensors", {}))
@@ -269,11 +271,12 @@ class RobotAgent:
         await self.boxes.close()  # made for the settings of old
         self._box_ahead()
         try:
-            driver = rhal.connect(robot.url, **robot.driver_options())
+            driver, world_error = await self._connect(robot)
         except (TypeError, ValueError, rhal.RhalError) as exc:  # the edit paths check first
             log.error("agent %s: new settings refused, keeping the old: %s", self.name, exc)
             return
         old, self.driver, self.motion_owner = self.driver, driver, None
+        self.world_error = world_error
         with contextlib.suppress(Exception):
             await old.close()  # stops the motors first
         await self.gateway.attach(driver)
@@ -281,6 +284,12 @@ class RobotAgent:
         self.link_error = None
         await self.open_robot()
         log.info("agent %s: reopened as %s", self.name, robot.url)
+
+    async def _connect(self, robot: Robot) -> tuple[rhal.Robot, rhal.RhalError | None]:
+        """Its driver, a sim's stored world resolved to its document (worlds.resolve), and
+        why it must not open (a world unknown, or its owner's no longer), or None."""
+        options, world_error = await database_sync_to_async(world_driver_options)(robot)
+        return rhal.connect(robot.url, **options), world_error
 
     async def open_robot(self) -> bool:
         """Open the robot's link; a robot away (unplugged, not yet on) is no reason to stop
@@ -291,6 +300,8 @@ class RobotAgent:
                 return True
             if self.lent_to is not None:
                 return False
+            if self.world_error is not None:  # a sim opens in its own world or not at all
+                return self._open_failed(self.world_error)
             try:
                 await driver.open()
             except rhal.RhalError as exc:
