@@ -1,45 +1,51 @@
-"""A simulated differential-drive robot in a walled arena, for ``sim://`` URLs.
+"""A simulated differential-drive robot in a world of walls and boxes, for ``sim://`` URLs.
 
-Options, also accepted in the URL query (``sim://?arena=square&max_linear=0.3``):
-``arena`` ("boxes", the default, or "square"), ``max_linear``, ``max_angular``; from code also
-``clock``, a callable returning seconds (default ``time.monotonic``) so tests can step time.
+Options, also accepted in the URL query (``sim://?world=maze&speed=10``):
+``world`` (a built-in world's name: boxes, the default, square, maze, line or rooms; or, from
+code, a world document as rhal.simulator.world describes: the agent passes a stored world so),
+``arena`` (the old name of ``world``, kept), ``speed`` (1 to 10: the sim's clock runs this many
+times faster than real time), ``max_linear``, ``max_angular``, ``language``; and, to make it a
+twin of a real robot, ``sonar`` (angles in degrees, "90,45,0,-45,-90"), ``floor_sensor`` and
+``range_cone_deg``, which override the world's robot. From code also ``clock``, a callable
+returning seconds (default ``time.monotonic``) so tests can step time.
 
-Two cameras: ``camera_jpeg()`` looks down on the arena (the robot's page shows it), and
-``front_camera_jpeg()`` sees what a camera on the robot's nose would: the walls, the boxes and
-the QR code landmarks on the walls, in perspective (``capabilities()["front_camera"]``). The
-Robot API's ``snapshot()`` and ``scan_barcode()`` use the front camera of a driver that has one.
+The physics and the sensor models are rhal.simulator's (docs/simulator.md): contact stops only
+the motion into what is touched, so the robot slides along walls and backs away freely; the
+range sensor is a cone; the world's robot may have a sonar ring and a floor sensor. Nothing runs
+in the background: each call first brings the motion up to now.
+
+Two cameras: ``camera_jpeg()`` looks down on the world (the robot's page shows it to scripts-off
+browsers), and ``front_camera_jpeg()`` sees what a camera on the robot's nose would: walls, boxes
+and the QR code landmarks on the walls (``capabilities()["front_camera"]``). The Robot API's
+``snapshot()`` and ``scan_barcode()`` use the front camera of a driver that has one.
 
 It hears no sound: a program's ``listen()`` hears the phrases typed to it (``hearing``).
-
-The robot starts at the arena centre (0, 0) facing north. Nothing runs in the background: each
-call first advances the pose from the last update to now along the exact arc of the commanded
-speeds. Travel is checked against walls and boxes every centimetre, so no time step is large
-enough to tunnel; on contact the robot stops there, bumper pressed, until the next command.
 """
 
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import math
 import time
 from collections.abc import Callable
 from typing import Any
 
-from rhal.arena import ARENAS, Arena
 from rhal.base import Robot
-from rhal.kinematics import advance_pose, compass_heading
+from rhal.kinematics import compass_heading
 from rhal.sim_words import LANGUAGES as SIM_LANGUAGES
+from rhal.simulator.physics import Motion
+from rhal.simulator.sensors import SensorModel
+from rhal.simulator.world import RobotSpec, World, WorldError
+from rhal.simulator.worlds import BUILTIN, load
 
-ROBOT_RADIUS = 0.15  # m
-MAX_RANGE = 4.0  # m, the range sensor's reach
-START_POSE = (0.0, 0.0, math.pi / 2)  # arena centre, facing north
+ROBOT_RADIUS = 0.15  # m, the default robot's (a world may say otherwise)
+MAX_RANGE = 4.0  # m, the default range sensor's reach
+START_POSE = (0.0, 0.0, math.pi / 2)  # the default world's start: its centre, facing north
 CAMERA_SIZE = (320, 240)
 FRONT_CAMERA_SIZE = (640, 480)
 FRONT_CAMERA_FOV = 62.0  # degrees, horizontal: a Raspberry Pi camera's
-
-SUBSTEP = 0.01  # m of travel between collision checks; far thinner than any wall or box
-CONTACT_TOLERANCE = 1e-6  # m: how exactly a contact is located
-BUMPER_REACH = 1e-3  # m: the bumper reads pressed this close to a surface
+SPEEDS = (1.0, 10.0)  # the time scales a sim runs at
 BATTERY_DRAIN = 0.05  # percent per metre travelled
 
 Pose = tuple[float, float, float]
@@ -49,10 +55,17 @@ class SimRobot(Robot):
     kind = "sim"
     option_help = {
         **Robot.option_help,
-        "arena": "the walled arena the robot starts in",
+        "world": "the world it runs in: a built-in one (boxes, square, maze, line, rooms) or a "
+        "stored world's name or number",
+        "arena": "the old name of the world option",
+        "speed": "how many times faster than real time it runs, 1 to 10",
         "language": "the language of the words drawn on its camera's picture",
+        "sonar": "angles of a sonar ring, degrees to the left of ahead (90,45,0,-45,-90); "
+        "blank: the world's robot's",
+        "floor_sensor": "a floor colour sensor under its nose; blank: the world's robot's",
+        "range_cone_deg": "the range sensor's beam width, degrees; blank: the world's robot's",
     }
-    option_choices = {"arena": tuple(ARENAS), "language": SIM_LANGUAGES}
+    option_choices = {"arena": tuple(BUILTIN), "language": SIM_LANGUAGES}
     quick = True  # computed in-process: nothing to wait for
     # No microphone: the Robot API's listen() hears what is typed into the robot page's "Say
     # to the robot" box instead (robots.typed_speech). A robot that hears through the
@@ -63,75 +76,133 @@ class SimRobot(Robot):
         self,
         url: str = "sim://",
         *,
+        world: str | dict[str, Any] | None = None,
         arena: str = "boxes",
+        speed: float = 1.0,
         language: str = "en",
+        sonar: str | float | list[float] | None = None,
+        floor_sensor: bool | None = None,
+        range_cone_deg: float | None = None,
         clock: Callable[[], float] = time.monotonic,
         **limits: Any,
     ) -> None:
         super().__init__(url, **limits)
-        if arena not in ARENAS:
-            raise ValueError(f"unknown arena {arena!r}; choose one of: {', '.join(ARENAS)}")
         if language not in SIM_LANGUAGES:
             known = ", ".join(SIM_LANGUAGES)
             raise ValueError(f"unknown language {language!r}; choose one of: {known}")
         self.language = language
-        self.arena_name = arena
-        self._arena: Arena = ARENAS[arena]
-        self._clock = clock
-        self._opened_at = self._updated_at = clock()
-        self._place_at_start()
-
-    async def reset(self) -> None:
-        """Stop and put the robot back at the start pose with a fresh odometer and battery."""
-        self._updated_at = self._clock()
-        self._place_at_start()
-
-    def _place_at_start(self) -> None:
-        self._pose: Pose = START_POSE
-        self._command = (0.0, 0.0)
-        self._blocked = False
-        self._distance = 0.0
+        self.world = _world(world if world is not None else arena)
+        self.arena_name = self.world.name
+        self.speed = _speed(speed)
+        self.robot_spec = _robot_spec(self.world.robot, sonar, floor_sensor, range_cone_deg)
+        spec = self.robot_spec
+        self._sensing = SensorModel(
+            self.world,
+            cone_deg=spec.cone_deg,
+            rays=spec.rays,
+            min_range=spec.min_range,
+            max_range=spec.max_range,
+            sonar=spec.sonar,
+            floor_sensor=spec.floor_sensor,
+        )
+        self._real_clock = clock
+        self._clock_zero = clock()
+        now = self._clock()
+        self._opened_at = now
+        self._motion = Motion(self.world, spec.radius, self.world.start_pose, now)
         self._derived_for: Pose | None = None
+
+    def _clock(self) -> float:
+        """The sim's time: ``speed`` times as fast as the real clock since it was made."""
+        real = self._real_clock()
+        return self._clock_zero + (real - self._clock_zero) * self.speed
+
+    async def reset(self, pose: Pose | None = None) -> None:
+        """Stop and put the robot at ``pose`` (x m, y m, theta rad), or the world's start pose,
+        with a fresh odometer and battery. ValueError, in plain words, for a pose outside the
+        arena or overlapping something."""
+        place = self.world.start_pose if pose is None else _pose(pose)
+        self._check_place(place)
+        self._motion.place(place, self._clock())
+        self._derived_for = None
+
+    def world_doc(self) -> dict[str, Any]:
+        """The world it runs in, as a document."""
+        return self.world.to_doc()
+
+    def robot_doc(self) -> dict[str, Any]:
+        """Its size and sensors (radius, range cone, sonar angles, floor sensor)."""
+        return self.robot_spec.to_doc()
+
+    # The pose, for code that places the robot directly (the camera tests).
+    @property
+    def _pose(self) -> Pose:
+        return self._motion.pose_at(self._clock())
+
+    @_pose.setter
+    def _pose(self, pose: Pose) -> None:
+        speeds = self._motion.command_speeds
+        self._motion.place(pose, self._clock())
+        self._motion.command(*speeds, self._clock())
 
     # -- hooks -----------------------------------------------------------------------------
 
     async def _open(self) -> None:
-        self._opened_at = self._updated_at = self._clock()
-        self._place_at_start()
+        now = self._clock()
+        self._opened_at = now
+        self._motion.place(self.world.start_pose, now)
+        self._derived_for = None
 
     async def _drive(self, linear: float, angular: float) -> None:
-        self._advance(self._clock())
-        self._command = (linear, angular)
-        self._blocked = False
+        self._motion.command(linear, angular, self._clock())
 
     async def _read_sensors(self) -> dict[str, Any]:
         now = self._clock()
-        self._advance(now)
-        self._derive_readings()
-        x, y, theta = self._pose
-        linear, angular = (0.0, 0.0) if self._blocked else self._command
-        return {
+        pose = self._motion.pose_at(now)
+        self._derive_readings(pose)
+        x, y, theta = pose
+        linear, angular = self._motion.velocity
+        distance = self._motion.distance_at(now)
+        readings = {
             "heading": self._heading,
             "range": self._range,
             "position": {"x": x, "y": y, "theta": theta},
             "velocity": {"linear": linear, "angular": angular},
-            "odometry": {"distance": self._distance},
+            "odometry": {"distance": distance},
             "bumper": self._bumper,
-            "battery": max(0.0, 100.0 - BATTERY_DRAIN * self._distance),
+            "battery": max(0.0, 100.0 - BATTERY_DRAIN * distance),
             "time": now - self._opened_at,
+            "zone": self._zone,
         }
+        if self.robot_spec.sonar:
+            readings["sonar"] = list(self._sonar)
+        if self.robot_spec.floor_sensor:
+            readings["floor"] = dict(self._floor)
+        return readings
 
     def _sensor_specs(self) -> dict[str, dict[str, Any]]:
-        return {
+        spec = self.robot_spec
+        specs: dict[str, dict[str, Any]] = {
             "heading": {"unit": "deg"},
-            "range": {"unit": "m", "max": MAX_RANGE},
+            "range": {"unit": "m", "max": spec.max_range},
             "position": {"unit": {"x": "m", "y": "m", "theta": "rad"}},
             "velocity": {"unit": {"linear": "m/s", "angular": "rad/s"}},
             "odometry": {"unit": {"distance": "m"}},
             "bumper": {"unit": "bool"},
             "battery": {"unit": "%"},
             "time": {"unit": "s"},
+            "zone": {"unit": "name"},
         }
+        if spec.sonar:
+            specs["sonar"] = {
+                "unit": "m",
+                "max": spec.max_range,
+                "count": len(spec.sonar),
+                "angles": list(spec.sonar),
+            }
+        if spec.floor_sensor:
+            specs["floor"] = {"unit": {"colour": "name", "light": "%"}}
+        return specs
 
     def _camera_spec(self) -> dict[str, Any]:
         width, height = CAMERA_SIZE
@@ -140,94 +211,148 @@ class SimRobot(Robot):
     def capabilities(self) -> dict[str, Any]:
         width, height = FRONT_CAMERA_SIZE
         front = {"width": width, "height": height, "format": "jpeg", "fov": FRONT_CAMERA_FOV}
-        return {**super().capabilities(), "front_camera": front}
+        sim = {"world": self.world.name, "speed": self.speed, **self.robot_doc()}
+        return {**super().capabilities(), "front_camera": front, "sim": sim}
 
     async def _camera_jpeg(self) -> bytes:
-        self._advance(self._clock())
-        self._derive_readings()
+        pose = self._motion.pose_at(self._clock())
+        self._derive_readings(pose)
         return await asyncio.to_thread(
-            _render, self._arena, self._pose, self._range, self._bumper, self.language
+            _render,
+            self.world,
+            pose,
+            self.robot_spec.radius,
+            self._range,
+            self._bumper,
+            self.language,
         )
 
     async def front_camera_jpeg(self) -> bytes:
         """What a camera on the robot's nose sees now, as JPEG bytes."""
         self._require_open()
-        self._advance(self._clock())
-        return await asyncio.to_thread(_render_front, self._arena, self._pose)
+        pose = self._motion.pose_at(self._clock())
+        return await asyncio.to_thread(_render_front, self.world, pose, self.robot_spec.radius)
 
-    # -- simulation ------------------------------------------------------------------------
+    # -- readings --------------------------------------------------------------------------
 
-    def _advance(self, now: float) -> None:
-        """Move the robot from the last update to ``now`` at the commanded speeds."""
-        dt = now - self._updated_at
-        if dt <= 0.0:
+    def _derive_readings(self, pose: Pose) -> None:
+        """Recompute pose-derived readings, only when the pose has changed: a stationary
+        robot's readings cost a comparison."""
+        if pose == self._derived_for:
             return
-        self._updated_at = now
-        linear, angular = self._command
-        if self._blocked or (linear == 0.0 and angular == 0.0):
-            return
-        if linear == 0.0:
-            # Turning on the spot never hits anything: the robot is round.
-            self._pose = advance_pose(*self._pose, 0.0, angular, dt)
-            return
-        self._pose, moved_for, self._blocked = self._sweep(linear, angular, dt)
-        self._distance += abs(linear) * moved_for
-
-    def _sweep(self, linear: float, angular: float, dt: float) -> tuple[Pose, float, bool]:
-        """Follow the arc for ``dt`` seconds; return (pose, seconds moved, hit something)."""
-        start = self._pose
-        # An arc that closes into a free circle repeats forever, so one lap is enough to check.
-        lap = math.tau / abs(angular) if angular else math.inf
-        span = min(dt, lap)
-        steps = max(1, math.ceil(abs(linear) * span / SUBSTEP))
-        safe = 0.0
-        for step in range(1, steps + 1):
-            t = span * step / steps
-            pose = advance_pose(*start, linear, angular, t)
-            if self._collides(pose):
-                safe = self._contact_time(start, linear, angular, safe, t)
-                return advance_pose(*start, linear, angular, safe), safe, True
-            safe = t
-        if dt > lap:
-            pose = advance_pose(*start, linear, angular, dt)
-        return pose, dt, False
-
-    def _contact_time(
-        self, start: Pose, linear: float, angular: float, safe: float, hit: float
-    ) -> float:
-        """Bisect between a free and a colliding time for the last free moment."""
-        while (hit - safe) * abs(linear) > CONTACT_TOLERANCE:
-            middle = (safe + hit) / 2.0
-            if self._collides(advance_pose(*start, linear, angular, middle)):
-                hit = middle
-            else:
-                safe = middle
-        return safe
-
-    def _collides(self, pose: Pose) -> bool:
-        return self._arena.clearance(pose[0], pose[1]) < ROBOT_RADIUS
-
-    def _derive_readings(self) -> None:
-        """Recompute pose-derived readings, only when the pose has changed."""
-        if self._pose is self._derived_for:
-            return
-        x, y, theta = self._derived_for = self._pose
+        self._derived_for = pose
+        x, y, theta = pose
+        sensing = self._sensing
         self._heading = compass_heading(theta)
-        self._range = self._arena.ray_distance(x, y, theta, MAX_RANGE)
-        self._bumper = self._arena.clearance(x, y) <= ROBOT_RADIUS + BUMPER_REACH
+        self._range = sensing.range_at(x, y, theta)
+        self._bumper = self._motion.bumper(pose)
+        self._zone = self.world.zone_at(x, y)
+        self._sonar = sensing.sonar_at(x, y, theta)
+        self._floor = sensing.floor_at(x, y, theta) if sensing.floor_sensor else None
+
+    def _check_place(self, pose: Pose) -> None:
+        x, y, _ = pose
+        world, radius = self.world, self.robot_spec.radius
+        if abs(x) > world.half_width or abs(y) > world.half_height:
+            raise ValueError(
+                f"the pose (x {x:.2f} m, y {y:.2f} m) is outside the arena, which reaches "
+                f"x +-{world.half_width:.2f} m and y +-{world.half_height:.2f} m"
+            )
+        clear = world.clearance(x, y)
+        if clear < radius - 1e-9:
+            where = "inside a wall or box" if clear < 0 else f"{clear:.2f} m from a wall or box"
+            raise ValueError(
+                f"the robot cannot stand at x {x:.2f} m, y {y:.2f} m: that is {where}, and "
+                f"the robot (radius {radius:.2f} m) needs {radius:.2f} m clear around it"
+            )
 
 
-def _render(arena: Arena, pose: Pose, range_m: float, bumper: bool, language: str) -> bytes:
+def _world(world: str | dict[str, Any]) -> World:
+    try:
+        return load(world)
+    except WorldError as exc:
+        if isinstance(world, str):
+            known = ", ".join(BUILTIN)
+            raise ValueError(f"unknown world {world!r}; choose one of: {known}") from None
+        where = f" (at {exc.path})" if exc.path else ""
+        raise ValueError(f"the world cannot be used{where}: {exc}") from None
+
+
+def _speed(speed: object) -> float:
+    low, high = SPEEDS
+    if isinstance(speed, bool) or not isinstance(speed, int | float) or not low <= speed <= high:
+        raise ValueError(f"speed must be a number from {low:g} to {high:g}, got {speed!r}")
+    return float(speed)
+
+
+def _robot_spec(
+    spec: RobotSpec, sonar: object, floor_sensor: bool | None, cone_deg: float | None
+) -> RobotSpec:
+    """The world's robot with the twin options that are given."""
+    changes: dict[str, Any] = {}
+    if sonar is not None:
+        changes["sonar"] = _sonar_angles(sonar)
+    if floor_sensor is not None:
+        if not isinstance(floor_sensor, bool):
+            raise ValueError(f"floor_sensor must be true or false, got {floor_sensor!r}")
+        changes["floor_sensor"] = floor_sensor
+    if cone_deg is not None:
+        if isinstance(cone_deg, bool) or not isinstance(cone_deg, int | float):
+            raise ValueError(f"range_cone_deg must be a number, got {cone_deg!r}")
+        if not 0 <= cone_deg <= 90:
+            raise ValueError(f"range_cone_deg must be 0 to 90 degrees, got {cone_deg!r}")
+        changes["cone_deg"] = float(cone_deg)
+    return dataclasses.replace(spec, **changes)
+
+
+def _sonar_angles(value: object) -> tuple[float, ...]:
+    """Sonar angles from a list, one number, or a text of numbers ("90,45,0" or "90 45 0")."""
+    if isinstance(value, str):
+        parts = value.replace(",", " ").split()
+        try:
+            items: list[Any] = [float(part) for part in parts]
+        except ValueError:
+            raise ValueError(
+                f"sonar must be angles in degrees like 90,0,-90, got {value!r}"
+            ) from None
+    elif isinstance(value, int | float) and not isinstance(value, bool):
+        items = [value]
+    elif isinstance(value, list | tuple):
+        items = list(value)
+    else:
+        raise ValueError(f"sonar must be a list of angles in degrees, got {value!r}")
+    if len(items) > 32:
+        raise ValueError("sonar has at most 32 angles")
+    angles = []
+    for item in items:
+        ok = isinstance(item, int | float) and not isinstance(item, bool)
+        if not ok or not math.isfinite(item) or not -180 <= item <= 180:
+            raise ValueError(f"each sonar angle must be -180 to 180 degrees, got {item!r}")
+        angles.append(float(item))
+    return tuple(angles)
+
+
+def _pose(pose: object) -> Pose:
+    try:
+        x, y, theta = (float(v) for v in pose)  # type: ignore[union-attr]
+    except (TypeError, ValueError):
+        raise ValueError(f"a pose is (x, y, theta) in metres and radians, got {pose!r}") from None
+    if not all(math.isfinite(v) for v in (x, y, theta)):
+        raise ValueError(f"a pose's x, y and theta must be finite numbers, got {pose!r}")
+    return x, y, theta
+
+
+def _render(
+    world: World, pose: Pose, radius: float, range_m: float, bumper: bool, language: str
+) -> bytes:
     # Imported here, in the worker thread, so Pillow costs nothing until a camera is watched.
     from rhal.sim_render import render_top_view
 
-    return render_top_view(
-        arena, pose, ROBOT_RADIUS, range_m, bumper, CAMERA_SIZE, language=language
-    )
+    return render_top_view(world, pose, radius, range_m, bumper, CAMERA_SIZE, language=language)
 
 
-def _render_front(arena: Arena, pose: Pose) -> bytes:
+def _render_front(world: World, pose: Pose, radius: float) -> bytes:
     from rhal.sim_render import render_front_view
 
     fov = math.radians(FRONT_CAMERA_FOV)
-    return render_front_view(arena, pose, ROBOT_RADIUS, FRONT_CAMERA_SIZE, fov)
+    return render_front_view(world, pose, radius, FRONT_CAMERA_SIZE, fov)

@@ -21,7 +21,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import shapely
 
 FORMAT = 1
 LIMITS = {"walls": 500, "boxes": 200, "lines": 100, "zones": 50, "landmarks": 50, "start": 20}
@@ -595,6 +594,8 @@ def _unique_zone_names(world: World) -> None:
 
 def _check_places(world: World) -> None:
     """Start poses clear of everything for the robot's radius; landmarks on a wall."""
+    import shapely  # only to check a document: a sim running a built-in world does without
+
     radius = world.robot.radius
     arena = shapely.box(-world.half_width, -world.half_height, world.half_width, world.half_height)
     obstacles = [("wall", i, shapely.Polygon(w.corners())) for i, w in enumerate(world.walls)]

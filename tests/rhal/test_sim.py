@@ -89,7 +89,10 @@ async def test_many_small_reads_agree_with_one_big_step(robot, clock, drive_for)
 @pytest.mark.parametrize(
     ("turn", "expected"),
     [(0.0, 2.0), (-math.pi / 2, 2.0), (math.pi, 2.0), (math.pi / 2, 2.0),
-     (-math.pi / 4, 0.8 * math.sqrt(2)), (3 * math.pi / 4, 0.9 * math.sqrt(2))],
+     # The cone is 15 degrees wide: its right edge meets the box's west face (x = 0.8) first,
+     (-math.pi / 4, 0.8 / math.cos(math.radians(37.5))),
+     # and the south-west box's north-east corner is inside it.
+     (3 * math.pi / 4, math.hypot(0.9, 0.7))],
 )  # fmt: skip
 async def test_range_measures_from_the_centre_to_walls_and_boxes(drive_for, turn, expected):
     readings = await drive_for(0.0, math.copysign(1.0, turn), abs(turn))
@@ -148,22 +151,37 @@ async def test_turning_against_the_wall_is_allowed(drive_for):
     assert readings["bumper"] is True
 
 
-async def test_a_huge_time_step_does_not_tunnel_through_a_box(drive_for):
+async def test_a_huge_time_step_slides_round_a_box_into_the_corner(drive_for):
     await drive_for(0.0, -1.0, math.pi / 4)  # face north-east, at the box
     readings = await drive_for(0.5, 0.0, 1e6)
-    # The diagonal meets the box's west face at x = 0.8; the robot's edge stops there.
-    assert readings["position"]["x"] == pytest.approx(0.8 - RADIUS, abs=1e-5)
-    assert readings["position"]["y"] == pytest.approx(0.8 - RADIUS, abs=1e-5)
+    # Along the box's west face, round its corner, along the north wall: pinned in the corner.
+    assert readings["position"]["x"] == pytest.approx(2.0 - RADIUS, abs=1e-5)
+    assert readings["position"]["y"] == pytest.approx(2.0 - RADIUS, abs=1e-5)
     assert readings["bumper"] is True
+    assert readings["velocity"]["linear"] == 0.0
+
+
+async def test_meeting_a_box_at_an_angle_slides_along_its_face(drive_for):
+    await drive_for(0.0, 1.0, 3 * math.pi / 4)  # face south-west, at the other box
+    # The diagonal meets the box's east face (x = -0.9) at y = -0.75: 1.06 m, 2.12 s at 0.5 m/s.
+    readings = await drive_for(0.5, 0.0, 2.5)
+    assert readings["position"]["x"] == pytest.approx(-0.9 + RADIUS, abs=1e-5)
+    # Then it slides south along the face at 0.5 cos 45 m/s.
+    slid = (2.5 - 0.75 * math.sqrt(2) / 0.5) * 0.5 * math.cos(math.pi / 4)
+    assert readings["position"]["y"] == pytest.approx(-0.75 - slid, abs=1e-4)
+    assert readings["bumper"] is True
+    assert readings["velocity"]["linear"] == pytest.approx(0.5 * math.cos(math.pi / 4), abs=1e-6)
 
 
 @pytest.mark.parametrize("seconds", [5.0, 1e6])
-async def test_one_long_step_does_not_jump_over_a_box(drive_for, seconds):
+async def test_one_long_step_does_not_jump_over_a_box(robot, drive_for, seconds):
     await drive_for(0.0, 1.0, 3 * math.pi / 4)  # face south-west, at the other box
-    # 5 s at 0.5 m/s would end in the free pocket behind the box, short of the corner.
     readings = await drive_for(0.5, 0.0, seconds)
-    assert readings["position"]["x"] == pytest.approx(-0.9 + RADIUS, abs=1e-5)
-    assert readings["position"]["y"] == pytest.approx(-0.9 + RADIUS, abs=1e-5)
+    x, y = readings["position"]["x"], readings["position"]["y"]
+    assert robot.world.clearance(x, y) >= RADIUS - 1e-6
+    assert x >= -0.9 + RADIUS - 1e-6 or y <= -1.3 - RADIUS + 1e-6  # east of it or south of it
+    if seconds > 100:  # round it and along the south wall into the corner
+        assert (x, y) == pytest.approx((-2.0 + RADIUS, -2.0 + RADIUS), abs=1e-5)
 
 
 async def test_a_huge_time_step_does_not_tunnel_through_a_wall(drive_for):
@@ -228,4 +246,5 @@ async def test_square_arena_has_no_boxes(clock):
     async with rhal.connect("sim://?arena=square", clock=clock) as bot:
         await bot.drive(0.0, -1.0)
         clock.advance(math.pi / 4)
-        assert await bot.sensor("range") == pytest.approx(2 * math.sqrt(2))
+        # The cone's edges meet the walls before its middle reaches the far corner.
+        assert await bot.sensor("range") == pytest.approx(2.0 / math.cos(math.radians(37.5)))
