@@ -15,6 +15,7 @@ simulator needs on every step (obstacle edges as one numpy array) is built once 
 
 from __future__ import annotations
 
+import colorsys
 import math
 import re
 from dataclasses import dataclass, field
@@ -27,19 +28,9 @@ LIMITS = {"walls": 500, "boxes": 200, "lines": 100, "zones": 50, "landmarks": 50
 MAX_LINE_POINTS = 500
 SIZE_RANGE = (1.0, 50.0)  # m, each side of the arena
 FLOOR_COLOUR = "#ffffff"
-#: Colour names the floor sensor reports: the nearest of these to the floor's colour.
-COLOUR_NAMES = {
-    "black": (0, 0, 0),
-    "white": (255, 255, 255),
-    "grey": (128, 128, 128),
-    "red": (220, 40, 40),
-    "green": (40, 170, 60),
-    "blue": (40, 80, 220),
-    "yellow": (250, 220, 60),
-    "orange": (250, 140, 30),
-    "brown": (130, 80, 40),
-    "purple": (140, 60, 170),
-}
+#: Colour names the floor sensor reports, by hue (degrees) up to which each holds.
+HUE_NAMES = ((15, "red"), (40, "orange"), (70, "yellow"), (165, "green"), (195, "cyan"),
+             (255, "blue"), (290, "purple"), (345, "pink"), (360, "red"))  # fmt: skip
 LANDMARK_REACH = 0.05  # m: a landmark stands on a wall when a wall is this close to it
 
 Point = tuple[float, float]
@@ -336,12 +327,16 @@ class World:
 
 
 def colour_name(colour: str) -> str:
-    """The nearest named colour to ``#rrggbb``."""
-    rgb = _rgb(colour)
-    return min(
-        COLOUR_NAMES,
-        key=lambda n: sum((a - b) ** 2 for a, b in zip(rgb, COLOUR_NAMES[n], strict=True)),
-    )
+    """The plain name of ``#rrggbb``: black, white or grey when it is dull, else its hue's
+    (red, orange, brown, yellow, green, cyan, blue, purple, pink)."""
+    hue, saturation, value = colorsys.rgb_to_hsv(*(c / 255 for c in _rgb(colour)))
+    if value < 0.2:
+        return "black"
+    if saturation < 0.15:
+        return "white" if value > 0.8 else "grey" if value > 0.35 else "black"
+    degrees = hue * 360
+    name = next(name for top, name in HUE_NAMES if degrees < top or top == 360)
+    return "brown" if name == "orange" and value < 0.6 else name
 
 
 def light_percent(colour: str) -> int:
@@ -397,6 +392,8 @@ def _parse(doc: Any) -> World:
     height = _number(size.get("height"), "size.height", "the arena's height", *SIZE_RANGE)
     arena = _Arena(width / 2, height / 2)
     robot = _robot(doc.get("robot", {}))
+    if "start" not in doc:  # none given: the centre, facing north
+        doc = {**doc, "start": [{"x": 0.0, "y": 0.0, "theta": math.pi / 2}]}
     world = World(
         name=name,
         title=title,
