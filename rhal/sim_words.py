@@ -1,5 +1,7 @@
-"""The words the simulated robot draws on its top view: the room names beside the landmarks'
-QR codes and the readings panel's labels, per language (the sim's ``language`` option).
+"""The words the simulated robot draws on its top view: the built-in worlds' room and zone
+names (beside the landmarks' QR codes, on the zones) and the readings panel's labels, per
+language (the sim's ``language`` option). A world of a teacher's keeps its own words: only the
+built-in worlds' are translated (rhal.sim_render).
 
 The picture is one stream for all who watch the robot (the robot's page, the run page), so
 its words are the robot's, like its voice (the ``speech`` setting): set on the robot's
@@ -12,9 +14,12 @@ WORDS: dict[str, dict[str, str]] = {
     "pt-br": {
         "home": "casa",
         "kitchen": "cozinha",
-        # "lab" as it is: "lab" is said in Portuguese too, and the picture's font (Pillow's
-        # default) has no accented letters, so no word here has one.
+        # "lab" as it is: "lab" is said in Portuguese too.
         "garage": "garagem",
+        "bedroom": "quarto",
+        "hall": "corredor",
+        "start": "início",
+        "goal": "chegada",
         "hdg": "rumo",
         "rng": "dist",
         "BUMP": "BATEU",
