@@ -38,7 +38,7 @@ ROOM = (205, 212, 220)  # above the walls
 FLOOR_PAINT = (200, 192, 176)  # the bare floor, as lit far away; nearer is darker
 FLOOR_NEAR_LIGHT = 0.72  # the floor's light at the frame's bottom row, of its far light
 FLOOR_TEXTURE_PX = 1024  # the longest side of a world's floor texture (3 MB, kept per world)
-FLOOR_TEXTURE_MAX_SCALE = 200  # px a metre, for small worlds
+FLOOR_TEXTURE_MAX_SCALE = 256  # px a metre, for small worlds
 # Faces running east-west (a north or a south face) are lit, north-south ones shaded, others
 # between: a corner shows as a change of shade.
 WALL_SHADES = ((182, 178, 166), (160, 166, 176))
@@ -153,28 +153,29 @@ def _place(mark, walls: np.ndarray, boxes: np.ndarray, thickest: float) -> Place
 
 
 def _floor_texture(world: World) -> tuple[Image.Image | None, float]:
-    """The floor's paint seen from above, north up, or None when the floor is bare."""
+    """The floor's paint seen from above, north up, or None when the floor is bare. Drawn at
+    twice the size and halved, so that edges are smooth where the camera enlarges them."""
     zones = [zone for zone in world.zones if zone.colour]
     if not zones and not world.lines:
         return None, 1.0
     scale = min(FLOOR_TEXTURE_MAX_SCALE, FLOOR_TEXTURE_PX / max(world.width, world.height))
     size = (max(1, round(world.width * scale)), max(1, round(world.height * scale)))
-    texture = Image.new("RGB", size, FLOOR_PAINT)
+    texture = Image.new("RGB", (2 * size[0], 2 * size[1]), FLOOR_PAINT)
     draw = ImageDraw.Draw(texture)
     hw, hh = world.half_width, world.half_height
 
     def to_pixel(x: float, y: float) -> tuple[float, float]:
-        return (x + hw) * scale, (hh - y) * scale
+        return (x + hw) * 2 * scale, (hh - y) * 2 * scale
 
     for zone in zones:
         west_north = to_pixel(zone.x - zone.width / 2, zone.y + zone.height / 2)
         east_south = to_pixel(zone.x + zone.width / 2, zone.y - zone.height / 2)
         draw.rectangle((*west_north, *east_south), fill=rgb(zone.colour))
     for line in world.lines:
-        width = max(1, round(line.width * scale))
+        width = max(2, round(line.width * 2 * scale))
         points = [to_pixel(*point) for point in line.points]
         draw.line(points, fill=rgb(line.colour), width=width, joint="curve" if width > 2 else None)
-    return texture, scale
+    return texture.reduce(2), scale
 
 
 # -- a frame -----------------------------------------------------------------------------------

@@ -217,3 +217,18 @@ def test_the_front_camera_sees_the_painted_floor():
     assert max(floor_pixel(1.8)) < 80  # on the line
     bare = front(world_of(), pose).getpixel((320, round(240 + focal * 0.2 / 0.6)))
     assert near(floor_pixel(0.6), bare, 8)  # before the zone: the floor as in a bare world
+
+
+@pytest.mark.parametrize("theta", [0.0, 0.7, math.pi / 2, 2.5, math.pi, -1.2])
+def test_the_painted_floor_is_where_the_camera_looks_from_any_heading(theta):
+    # A small blue square on the floor 1 m ahead and 0.3 m to the right of the camera.
+    camera = (0.2, -0.1)
+    ahead, right = (math.cos(theta), math.sin(theta)), (math.sin(theta), -math.cos(theta))
+    x = camera[0] + ahead[0] * 1.0 + right[0] * 0.3
+    y = camera[1] + ahead[1] * 1.0 + right[1] * 0.3
+    spot = {"name": "spot", "x": x, "y": y, "width": 0.2, "height": 0.2, "colour": "#2040e0"}
+    pose = (camera[0] - RADIUS * ahead[0], camera[1] - RADIUS * ahead[1], theta)
+    image = front(world_of(zones=[spot]), pose)
+    focal = FRONT_SIZE[0] / 2 / math.tan(FOV / 2)
+    red, _, blue = image.getpixel((round(320 + focal * 0.3), round(240 + focal * 0.2)))
+    assert blue > red + 80
