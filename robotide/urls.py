@@ -13,6 +13,7 @@ from robotide import views_account as account
 from robotide.api import api
 from robotide.security import LoginForm
 from robots import gateway_views
+from robots import reset as robot_reset
 from robots import say as robot_say
 from robots import views as robots
 
@@ -91,6 +92,7 @@ urlpatterns = [
     path("robots/<slug:name>/queue/move", robots.robot_queue_move, name="robot-queue-move"),
     path("robots/<slug:name>/queue/resume", robots.robot_queue_resume, name="robot-queue-resume"),
     path("robots/<slug:name>/say", robot_say.robot_say, name="robot-say"),
+    path("robots/<slug:name>/reset", robot_reset.robot_reset, name="robot-reset"),
     path("robots/<slug:name>/camera.jpg", robots.robot_camera, name="robot-camera"),
     path("robots/<slug:name>/world.json", robots.robot_world, name="robot-world"),
     path("robots/<slug:name>/gateway", gateway_views.robot_gateway, name="robot-gateway"),

@@ -28,6 +28,7 @@ class RobotAdminForm(RobotConfigForm):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
+        self.fields.pop("start_each_run", None)  # a run setting: in the JSON, as the others
         self.fields["run_settings"].initial = self._run_settings()
 
     def _run_settings(self) -> dict:

@@ -45,6 +45,7 @@ from robots.readings import age_shows
 from robots.robot_api import RobotApi
 from robots.run_queue import RunQueue
 from robots.sim_view import PoseStream, sim_info
+from robots.start_pose import StartPose
 from runbox import SYSTEM_PATH, cgroups, launcher, seccomp
 from runbox.ahead import Ahead, discard
 from runbox.box import Launch, Listener, make_box
@@ -176,6 +177,8 @@ class RobotAgent:
         self._shutting_down = False
         self.handlers.update(self.queue.handlers)
         self.handlers.update(self.api.host.handlers)  # robot.hear: the "Say to the robot" box
+        self.starts = StartPose(self)  # robot.reset; where each run starts
+        self.handlers.update(self.starts.handlers)
         self.poses = PoseStream(self)  # a sim's pose for pages that draw it (robot.world)
         self.handlers.update(self.poses.handlers)
         self.lent_to: str | None = None  # a serial bridge client has the robot's device
@@ -249,6 +252,7 @@ class RobotAgent:
         """The robot's row, and what it says about runs here."""
         robot = await database_sync_to_async(Robot.objects.get)(name=self.name)
         self.limits = robot.run_limits(settings.RUN_DEFAULTS)
+        self.start_each_run = robot.settings.get("start_each_run") is True  # robots.start_pose
         # Off the event loop: the first look may start a process and compile the seccomp filter.
         self.isolation, self.isolation_error = await asyncio.to_thread(resolve_isolation, robot)
         if self.isolation is not None:  # runs' cgroups inside this robotide's parent, if any
@@ -433,6 +437,7 @@ class RobotAgent:
             state["sim"] = sim_info(self.driver)  # pages draw a sim themselves
             state["lease"] = self.lease.holder.as_dict() if self.lease.holder else None
             state["heard"] = self.api.host.last_heard  # what the last listen() heard
+            state["resettable"] = self.starts.can_reset()  # a Reset button (robots.reset)
             await self.reply(message, {**state, "shows": self.shows})
         elif kind == "robot.teleop":
             holder = Holder("teleop", message["owner"], message.get("user", "?"))
@@ -545,6 +550,7 @@ class RobotAgent:
             return "stopped", "stopped by user before it started"
         if self.lease.estopped:  # pressed while its start was decided (its share's admission)
             return "stopped", "emergency stop"
+        await self.starts.before_run(run_id)  # at the start pose, if it is to start there
         return None
 
     async def _launch(self, run_id: int, message: dict, claimed=None, gate=None) -> ActiveRun:

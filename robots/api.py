@@ -11,7 +11,7 @@ import rhal
 from programs.api import Error
 from robotide.names import Name
 from robotide.schemas import Body
-from robots import disclosure, fair_shares, say, stops
+from robots import disclosure, fair_shares, reset, say, stops
 from robots.bus import announce_robot_sync, ask_agent_sync, reconfigure_sync
 from robots.driver_settings import check_settings, known_driver
 from robots.models import Robot, get_robot_for_user, robots_for_user
@@ -202,3 +202,49 @@ def robot_hear(request, name: Name, data: HearIn):
     except say.SayRefused as exc:
         return Status(409, {"detail": str(exc)})
     return {"robot": robot.name, "text": data.text, "listening": listening}
+
+
+class PoseIn(Body):
+    x: float | None = Field(None, allow_inf_nan=False, description="m east of the arena's centre")
+    y: float | None = Field(None, allow_inf_nan=False, description="m north of the arena's centre")
+    theta: float | None = Field(
+        None, allow_inf_nan=False, description="rad, counter-clockwise from east"
+    )
+
+    @model_validator(mode="after")
+    def all_or_none(self):
+        given = [value is not None for value in (self.x, self.y, self.theta)]
+        if any(given) and not all(given):
+            raise ValueError(_("give x, y and theta, all three or none"))
+        return self
+
+    def pose(self) -> tuple[float, float, float] | None:
+        return None if self.x is None else (self.x, self.y, self.theta)
+
+
+class ResetOut(Schema):
+    robot: str
+    pose: list[float] | None = Field(
+        description="[x, y, theta] it was put at, where the next run starts; null: the world's"
+        " start pose"
+    )
+
+
+@robots_router.post("/{name}/reset", response={200: ResetOut, 409: Error, 503: Error})
+def robot_reset(request, name: Name, data: PoseIn | None = None):
+    """A simulated robot back at its world's start pose, or at the pose given (where the next
+    run starts, whatever its start_each_run setting says): stopped, with a fresh odometer,
+    battery and path. Whoever may drive it; while someone else's run goes on it, its owner and
+    staff only (409 else). 409 for a robot that cannot be reset (a real one), 422 for a pose
+    outside its world or on something."""
+    robot = get_robot_for_user(request.user, name)
+    if not reset.may_reset(request.user, robot):
+        raise HttpError(403, reset.not_yours(robot))
+    pose = data.pose() if data is not None else None
+    try:
+        reset.reset_sync(robot, request.user, pose)
+    except reset.ResetRefused as exc:
+        if exc.status == 422:  # as ninja's own validation errors
+            raise HttpError(422, str(exc)) from None
+        return Status(409, {"detail": str(exc)})
+    return {"robot": robot.name, "pose": list(pose) if pose is not None else None}

@@ -23,6 +23,7 @@ from robots.driver_words import option_shown
 from robots.fair_shares import robot_setting
 from robots.host_services import check_speech_settings
 from robots.models import RUN_SETTINGS, Robot
+from robots.reset import check_setting as check_start_each_run
 from runbox.isolation import IsolationUnavailable, Policy
 from runbox.launcher import Limits
 
@@ -46,6 +47,7 @@ def check_settings(url: str, settings: dict) -> None:
         robot_setting(settings)  # runs_at_once
         CameraSettings.parse(settings.get("camera"))
         check_speech_settings(settings.get("speech"))
+        check_start_each_run(settings)
         Policy.from_settings(robot.run_isolation(django_settings.RUN_ISOLATION))
         rhal.connect(url, **robot.driver_options())  # builds the driver, opens nothing
     except (TypeError, ValueError, AttributeError, rhal.RhalError, IsolationUnavailable) as exc:

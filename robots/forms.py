@@ -8,6 +8,8 @@ from programs.access import programs_for_user
 from robotide import names
 from robots.driver_settings import add_option_fields, check_settings, known_driver, settings_from
 from robots.models import RUN_SETTINGS, Robot, RobotButton
+from robots.reset import SETTING as START_EACH_RUN
+from robots.reset import can_reset_driver
 
 WHO_FIELDS = ("drive_by", "estop_by")
 
@@ -31,6 +33,16 @@ class RobotConfigForm(forms.ModelForm):
         self.driver_changed = False
         if self.instance.url:
             add_option_fields(self, self.instance)
+        if can_reset_driver(self.instance.url or ""):  # a sim: its run setting
+            self.fields[START_EACH_RUN] = forms.BooleanField(
+                required=False,
+                initial=self.instance.settings.get(START_EACH_RUN) is True,
+                label=_("Each run starts at the world's start pose"),
+                help_text=_(
+                    "Before each run the robot is put back there (a Reset); else a run starts"
+                    " where the last one left it. A Reset with a pose wins, for the next run."
+                ),
+            )
 
     def clean_drive_by(self):
         return self.cleaned_data.get("drive_by") or self.instance.drive_by or "everyone"
@@ -60,6 +72,10 @@ class RobotConfigForm(forms.ModelForm):
                 check_settings(url, settings)
             except ValueError as exc:
                 self.add_error(None, str(exc))
+        if START_EACH_RUN in self.fields and not self.driver_changed:
+            settings = {k: v for k, v in settings.items() if k != START_EACH_RUN}
+            if cleaned.get(START_EACH_RUN):  # stored only when on: off is the default
+                settings[START_EACH_RUN] = True
         self.instance.settings = settings
         return cleaned
 

@@ -94,6 +94,12 @@ def _bool(value):
     return None if type(value) is bool else "must be true or false"
 
 
+def _pose(value):
+    if not isinstance(value, list | tuple) or len(value) != 3 or any(_speed(v) for v in value):
+        return "must be [x, y, theta], three finite numbers"
+    return None
+
+
 def _args(value):
     if not isinstance(value, list | tuple) or len(value) > MAX_ARGS:
         return f"must be a list of at most {MAX_ARGS} texts"
@@ -140,6 +146,12 @@ SCHEMAS: dict[str, dict[str, tuple[Callable, bool]]] = {
     "robot.release": {"owner": (_channel, REQUIRED)},
     "robot.take_control": {"owner": (_channel, REQUIRED), "user": (_text(), REQUIRED)},
     "robot.reconfigure": {},
+    # robots.start_pose (StartPose.handlers): a sim put back at its start, or at a pose
+    "robot.reset": {
+        "pose": (_pose, OPTIONAL),
+        "by": (_text(), OPTIONAL),
+        "override": (_bool, OPTIONAL),
+    },
     # robots.sim_view (PoseStream.handlers): a sim's world, for pages that draw it
     "robot.world": {},
     # robots.host_services (HostServices.handlers): a phrase typed for listen()

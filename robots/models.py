@@ -13,7 +13,7 @@ from robots.isolation_words import isolation_shown
 # Settings for the runs on a robot; anything else in its `settings` goes to its driver.
 RUN_SETTINGS = (
     "limits", "isolation", "network", "tmp_mb", "loopback_ports", "allow_networks", "camera",
-    "speech", "queue_turn_seconds", "runs_at_once",
+    "speech", "queue_turn_seconds", "runs_at_once", "start_each_run",
 )  # fmt: skip
 
 

@@ -22,6 +22,7 @@ from robots.driver_settings import current_values
 from robots.forms import ButtonForm, RobotConfigForm
 from robots.models import RobotButton, RobotStop, get_robot_for_user, robots_for_user
 from robots.readings import seen_by, sensor_rows, show_items, status
+from robots.reset import may_reset, setting_row
 from robots.runs import RunRefused, start_run
 
 SNAPSHOT_TIMEOUT = 1.0
@@ -50,6 +51,7 @@ def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
         "isolation_line": disclosure.isolation_line(request.user, robot),
         # Its settings' values (device paths, hosts...) for its owner and staff only.
         "options": current_values(robot) if disclosure.sees_setup(request.user, robot) else [],
+        "start_each_run": setting_row(robot),  # a sim's run setting (robots.reset)
         "running": runs_for_user(request.user).filter(robot=robot, state__in=Run.ACTIVE),
         "programs": programs_for_user(request.user),
         **queue_context(request.user, robot),
@@ -81,6 +83,8 @@ def robot_state_context(robot, user) -> dict:
         "drive": state["drive"],
         "model": state.get("model"),
         "heard": state.get("heard"),  # what the last listen() heard (robots/_say.html)
+        # A Reset (robots/_reset.html) for a robot that can be reset, to whoever may drive it.
+        "may_reset": bool(state.get("resettable")) and may_reset(user, robot),
         "shows": show_items(seen_by(user, state["shows"])),
     }
 
