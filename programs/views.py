@@ -35,7 +35,7 @@ from programs.runlog import download
 from programs.shares import ShareError, add_share
 from robotide.redirects import back
 from robots import run_queue
-from robots.availability import no_robot_reason, robot_to_run_on
+from robots.availability import robot_to_run_on, run_choices
 from robots.models import robots_for_user
 from robots.runs import AgentUnreachable, RunRefused, request_stop, start_run
 
@@ -48,7 +48,6 @@ def program_list(request: HttpRequest) -> HttpResponse:
 def _list_context(request) -> dict:
     visible = programs_for_user(request.user)
     gallery = Share.objects.filter(program=OuterRef("pk"), everyone=True)
-    robots = robots_for_user(request.user)
     return {
         "programs": visible.filter(owner=request.user),
         # Shared with them, their classes' programs for a teacher, everything for admins.
@@ -57,8 +56,8 @@ def _list_context(request) -> dict:
         .order_by("owner__username", "name"),
         "new_form": NewProgramForm(owner=request.user, auto_id="new_%s"),
         "upload_form": UploadForm(owner=request.user, auto_id="upload_%s"),
-        "robots": robots,
-        "no_robot": no_robot_reason(request.user, robots),  # why Run is disabled, if it is
+        # robots, offer_sim, no_robot (why Run is disabled, if it is), sim_note
+        **run_choices(request.user),
     }
 
 
@@ -116,14 +115,13 @@ def _render_editor(request, program, form, status=200, conflict=None):
         "language": program.lang,
         "editor_modes": editor_modes(),
         "editor_modes_json": json.dumps(editor_mode_of_language()),
-        "robots": robots_for_user(request.user),
+        **run_choices(request.user),  # robots, offer_sim, no_robot, sim_note
         "runs": runs_for_user(request.user).filter(program=program)[:10],
         "revision": program.revisions.first(),
         "can_edit": can(request.user, EDIT, program),
         "is_owner": can(request.user, OWN, program),
         "shares": program.shares.select_related("user", "group"),
     }
-    context["no_robot"] = no_robot_reason(request.user, context["robots"])
     if draft := workbench.draft_to_offer(request.user, program):
         context["draft"] = draft
         context["draft_data"] = {"source": draft.source, "language": draft.language}

@@ -30,6 +30,7 @@ from programs.access import EDIT, can, get_program_for_user
 from programs.forms import EditProgramForm, free_name, too_large
 from programs.models import MAX_SOURCE_BYTES, Draft, Program, Revision
 from robotide.security import plain_number
+from robots import sims
 from robots.availability import robot_to_run_on
 from robots.models import get_robot_for_user
 from robots.runs import RunRefused, start_run
@@ -84,6 +85,7 @@ def program_start(request: HttpRequest, program_id: int) -> HttpResponse:
     # console opens the run's own websocket, for a page whose console's is not open.
     response = render(request, "programs/_console.html", {"run": run})
     response["X-Run"] = str(run.pk)
+    response["X-Robot"] = robot.name  # "My sim" (sims.MY_SIM) is a robot of its own now
     if revision is not None:
         response["X-Revision"] = str(revision)
     return response
@@ -94,7 +96,11 @@ def program_start(request: HttpRequest, program_id: int) -> HttpResponse:
 def program_panel(request: HttpRequest, program_id: int) -> HttpResponse:
     """The chosen robot's live view for the side panel: camera, readings, what is shown."""
     get_program_for_user(request.user, program_id)
-    robot = get_robot_for_user(request.user, request.GET.get("robot", ""))
+    name = request.GET.get("robot", "")
+    if name == sims.MY_SIM:  # "My sim (new)": made when it first runs, not when looked at
+        return render(request, "programs/_sim_to_make.html")
+    robot = get_robot_for_user(request.user, name)
+    sims.touch(robot)  # a personal sim watched is in use
     return render(request, "programs/_panel.html", robot_state_context(robot, request.user))
 
 

@@ -20,6 +20,7 @@ from robots.bridges_api import bridges_router
 from robots.bus import AgentUnavailable
 from robots.gateway_api import gateway_router
 from robots.runs import AgentUnreachable, RunRefused
+from robots.sims_api import sims_router
 from worlds.api import worlds_router
 
 
@@ -101,6 +102,7 @@ api.add_router("/robots", bridges_router)
 api.add_router("/programs", shares_router)
 api.add_router("/groups", groups_router)
 api.add_router("/tokens", tokens_router)
+api.add_router("/sims", sims_router)
 api.add_router("/worlds", worlds_router)
 
 

@@ -78,6 +78,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="also serve N simulated robots, sim-1 to sim-N (registered if new); "
         "default ROBOTIDE_SIM_ROBOTS or 0",
     )  # fmt: skip
+    agent.add_argument(
+        "--personal-sims", action="store_true",
+        help="also serve users' personal sims (made and removed while it runs) and remove "
+        "idle ones: one such agent process per fleet",
+    )  # fmt: skip
     token = commands.add_parser("token", help="print a new API token for a user")
     token.add_argument("username")
     token.add_argument("--name", default="command line")
@@ -529,19 +534,19 @@ def cmd_agent(args, rest) -> int:
     if args.url:
         register_robot(names[0], args.url)
     missing = [n for n in names if not Robot.objects.filter(name=n).exists()]
-    if missing or not names:
+    if missing or not (names or args.personal_sims):
         print(f"robotide agent: no robot named {', '.join(map(repr, missing)) or 'given'};"
               " add it in the admin, POST /api/robots, or give --url", file=sys.stderr)  # fmt: skip
         return 2
     protect_data_dir()
-    asyncio.run(run_agents(names))
+    asyncio.run(run_agents(names, personal_sims=args.personal_sims))
     return 0
 
 
 def cmd_online(args, rest) -> int:
     from robots.models import Robot
 
-    robots = Robot.objects.all()
+    robots = Robot.objects.filter(reaped__isnull=True)  # not removed personal sims
     if args.here:
         robots = robots.filter(agent_host=socket.gethostname())
     if args.names:
@@ -575,13 +580,17 @@ def register_robot(name: str, url: str) -> None:
               " (change it on its page)", file=sys.stderr)  # fmt: skip
 
 
-async def run_agents(names: list[str]) -> None:
-    """Each robot's agent, until SIGTERM or SIGINT; one that fails is started again."""
+async def run_agents(names: list[str], personal_sims: bool = False) -> None:
+    """Each robot's agent, until SIGTERM or SIGINT; one that fails is started again. With
+    ``personal_sims``, the personal sims' too, and their reaper (robots.sims)."""
     from robots.agent import AgentManager
 
     manager = AgentManager()
     for name in names:
         manager.start_agent(name)
+    if personal_sims:
+        await manager.start(personal_only=True)
+        names = [*names, "personal sims"]
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):

@@ -510,6 +510,16 @@ RUNS_PER_USER = env_int("ROBOTIDE_RUNS_PER_USER", 2)
 RUNS_PER_STAFF = env_int("ROBOTIDE_RUNS_PER_STAFF", 8)
 if RUNS_PER_USER < 0 or RUNS_PER_STAFF < 0:
     raise ValueError("ROBOTIDE_RUNS_PER_USER and ROBOTIDE_RUNS_PER_STAFF must be 0 or more")
+# -- Personal sims (robots.sims): simulated robots of one's own, this many a user (0: none)
+# and on the whole server; one unused this many minutes is removed (its runs are kept).
+SIMS_PER_USER = env_int("ROBOTIDE_SIMS_PER_USER", 2)
+SIMS_MAX = env_int("ROBOTIDE_SIMS_MAX", 40)
+SIM_IDLE_MINUTES = env_float("ROBOTIDE_SIM_IDLE_MINUTES", 60.0)
+if SIMS_PER_USER < 0 or SIMS_MAX < 0 or SIM_IDLE_MINUTES <= 0:
+    raise ValueError(
+        "ROBOTIDE_SIMS_PER_USER and ROBOTIDE_SIMS_MAX must be 0 or more, and"
+        " ROBOTIDE_SIM_IDLE_MINUTES more than 0"
+    )
 # -- All runs together (runbox.share): their parent cgroup's memory (a share of the RAM or of
 # the server's own cgroup, whichever is smaller), processes, and CPU weight (the server's 100).
 RUNS_SHARE = {

@@ -34,7 +34,7 @@ from django.utils import timezone
 import rhal
 from programs.languages import CLIENTS_DIR, LanguageUnavailable, get_language
 from programs.models import Run
-from robots import messages, rpc
+from robots import messages, rpc, sims
 from robots.bridges import Bridges
 from robots.bus import RUNS_GROUP, run_group
 from robots.camera import CameraHub
@@ -971,16 +971,28 @@ class AgentManager:
     def __init__(self):
         self.agents: dict[str, tuple[RobotAgent, asyncio.Task]] = {}
         self._listener: asyncio.Task | None = None
+        self._reaper: asyncio.Task | None = None
         self._failures: dict[str, int] = {}
         self._closing = False
+        self.personal_only = False
 
-    async def start(self) -> None:
-        names = await database_sync_to_async(
-            lambda: list(Robot.objects.values_list("name", flat=True))
-        )()
+    async def start(self, personal_only: bool = False) -> None:
+        """Every robot's agent but removed personal sims' (or, ``personal_only``, the personal
+        sims' alone: `robotide agent --personal-sims`), those added later, and the reaper of
+        idle personal sims (robots.sims)."""
+        self.personal_only = personal_only
+        names = await database_sync_to_async(sims.robots_to_serve)(personal_only)
         for name in names:
             self.start_agent(name)
         self._listener = asyncio.create_task(self._listen())
+        self._reaper = asyncio.create_task(sims.reap_loop(self.stop_agent), name="sims-reaper")
+
+    async def stop_agent(self, name: str) -> None:
+        """Its robot is gone (a personal sim removed): its agent shuts down, not to restart."""
+        found = self.agents.pop(name, None)
+        if found is not None:
+            found[1].cancel()
+            await asyncio.gather(found[1], return_exceptions=True)
 
     def start_agent(self, name: str) -> RobotAgent:
         if name in self.agents and not self.agents[name][1].done():
@@ -1013,12 +1025,16 @@ class AgentManager:
                 await asyncio.sleep(RETRY_DELAY)
                 continue
             if message.get("type") == "robot.added":
-                self.start_agent(message["name"])
+                if await database_sync_to_async(sims.serves)(message["name"], self.personal_only):
+                    self.start_agent(message["name"])
+            elif message.get("type") == "robot.removed":
+                await self.stop_agent(message["name"])
 
     async def shutdown(self) -> None:
         self._closing = True
-        if self._listener:
-            self._listener.cancel()
+        for task in (self._listener, self._reaper):
+            if task:
+                task.cancel()
         for _, task in self.agents.values():
             task.cancel()
         await asyncio.gather(*(t for _, t in self.agents.values()), return_exceptions=True)

@@ -69,6 +69,12 @@ class RobotOut(Schema):
         None, description="runs this robot has going at once, whoever's; null: no limit"
     )
     runs_going: int = Field(0, description="runs going on this robot now")
+    personal: bool = Field(
+        False, description="a personal sim (/api/sims): its owner's alone, with their teachers"
+    )
+    twin_of: str = Field(
+        "", description="a personal sim's: the robot whose speeds and sensors it has"
+    )
 
     @staticmethod
     def resolve_url(robot, context):

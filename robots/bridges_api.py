@@ -70,6 +70,8 @@ def _robot(request, name: str, change: bool = False) -> Robot:
     robot = get_robot_for_user(request.user, name)
     if change and not robot.configurable_by(request.user):
         raise HttpError(403, _("Only the robot's owner or staff change its serial bridges."))
+    if change and robot.personal and not request.user.is_staff:  # a device path is the host's
+        raise HttpError(403, _("A personal sim has no serial port to share; staff add bridges."))
     return robot
 
 

@@ -101,6 +101,26 @@ class Robot(models.Model):
         _("who may stop it"), max_length=10, choices=WHO, default="everyone",
         help_text=_("Who may press its emergency stop"),
     )  # fmt: skip
+    # A personal sim (robots.sims): a user's own simulated robot. Its owner, staff and the
+    # teachers of its owner's classes see, drive and stop it, whatever the fields above say;
+    # only its owner runs programs on it (no queue). An idle one is removed ("reaped"): its
+    # row stays while runs name it (their logs are kept), out of every list and agent.
+    personal = models.BooleanField(
+        _("personal sim"), default=False, editable=False,
+        help_text=_("A user's own simulated robot: only they, their teachers and staff see it"),
+    )  # fmt: skip
+    twin_of = models.CharField(
+        _("twin of"), max_length=50, blank=True, editable=False,
+        help_text=_("The robot whose speeds and sensors it copies"),
+    )  # fmt: skip
+    used = models.DateTimeField(
+        _("last used"), null=True, blank=True, editable=False,
+        help_text=_("A personal sim: made, chosen, reset or run on"),
+    )  # fmt: skip
+    reaped = models.DateTimeField(
+        _("removed"), null=True, blank=True, editable=False,
+        help_text=_("A personal sim removed (idle, or by its owner); kept for its runs"),
+    )  # fmt: skip
 
     class Meta:
         verbose_name = _("robot")
@@ -140,9 +160,16 @@ class Robot(models.Model):
         """Press its emergency stop."""
         return self._allows(self.estop_by, user)
 
+    def runs_programs_of(self, user) -> bool:
+        """Whose programs may run on it, among those who may drive it: a personal sim's
+        owner's alone (nobody queues for it)."""
+        return not self.personal or self.owner_id == user.pk
+
     def _allows(self, who: str, user) -> bool:
         if not user.is_authenticated:
             return False
+        if self.personal:  # its owner, staff, the teachers of its owner's classes
+            return self.configurable_by(user) or taught_by(self.owner_id, user)
         if who == "everyone" or self.configurable_by(user):
             return True
         if who == "teachers":
@@ -394,16 +421,33 @@ def robot_group(name: str) -> str:
     return f"robot-{name}"
 
 
-def robots_for_user(user):
+def taught_by(student_id: int | None, user) -> bool:
+    """Whether ``user`` teaches a class of the user numbered ``student_id``."""
+    from django.contrib.auth.models import Group
+
+    return Group.objects.filter(user=student_id, teachers__user=user).exists()
+
+
+def robots_for_user(user, reaped: bool = False):
     """The robots ``user`` may use: those of no class in particular, those of their classes
-    (as a member or a teacher), those they own, and all of them for admins."""
+    (as a member or a teacher), those they own, and all of them for admins. Personal sims:
+    to their owners, staff and the teachers of their owners' classes only. Removed sims
+    (``reaped``) are left out unless asked for."""
     if not user.is_authenticated:
         return Robot.objects.none()
+    robots = Robot.objects.all() if reaped else Robot.objects.filter(reaped__isnull=True)
     if user.is_superuser:
-        return Robot.objects.all()
-    mine = models.Q(groups__user=user) | models.Q(groups__teachers__user=user)
-    mine |= models.Q(owner=user)  # who looks after it sees it, whatever its classes
-    return Robot.objects.filter(models.Q(groups__isnull=True) | mine).distinct()
+        return robots
+    Q = models.Q
+    classes = Q(groups__user=user) | Q(groups__teachers__user=user)
+    shared = Q(personal=False) & (Q(groups__isnull=True) | classes)
+    # who looks after it sees it, whatever its classes (a personal sim: its owner)
+    seen = shared | Q(owner=user)
+    if user.is_staff:
+        seen |= Q(personal=True)
+    else:  # a student's sim, to the teachers of the student's classes
+        seen |= Q(personal=True, owner__groups__teachers__user=user)
+    return robots.filter(seen).distinct()
 
 
 def get_robot_for_user(user, name: str) -> Robot:
@@ -412,4 +456,13 @@ def get_robot_for_user(user, name: str) -> Robot:
             raise Robot.DoesNotExist
         return robots_for_user(user).get(name=name)
     except Robot.DoesNotExist:
+        removed = robots_for_user(user, reaped=True).filter(name=name, reaped__isnull=False)
+        if not names.problem(name) and removed.exists():
+            raise Http404(
+                gettext(
+                    "The simulated robot %(name)s was removed (unused for a while, or deleted"
+                    " by its owner); its runs and their logs are kept."
+                )
+                % {"name": name}
+            ) from None
         raise Http404(gettext("No robot named %(name)s.") % {"name": repr(name)}) from None

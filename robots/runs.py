@@ -25,6 +25,11 @@ def start_run(program: Program, robot: Robot, user, args=()) -> Run:
             _("Only %(who)s may run programs on %(robot)s.")
             % {"who": robot.get_drive_by_display(), "robot": robot.name}
         )
+    if not robot.runs_programs_of(user):  # a personal sim: nobody queues for its owner's
+        raise PermissionDenied(
+            _("Only its owner runs programs on %(robot)s, a personal sim; make one of your own.")
+            % {"robot": robot.name}
+        )
     language = program.lang
     if not language.available:
         raise RunRefused(

@@ -14,7 +14,7 @@ from programs.access import get_program_for_user, programs_for_user, runs_for_us
 from programs.models import Run, in_line
 from robotide.redirects import back
 from robotide.security import plain_number
-from robots import disclosure, fair_shares, gateway_views, run_queue, stops
+from robots import disclosure, fair_shares, gateway_views, run_queue, sims, stops
 from robots.availability import no_robot_reason
 from robots.bus import AgentUnavailable, ask_agent_sync, reconfigure_sync
 from robots.camera import has_camera
@@ -41,6 +41,7 @@ def robot_list(request: HttpRequest) -> HttpResponse:
 @login_required
 def robot_detail(request: HttpRequest, name: str) -> HttpResponse:
     robot = get_robot_for_user(request.user, name)
+    sims.touch(robot)  # a personal sim watched is in use
     context = {
         "robot": robot,
         "buttons": robot.buttons.all(),

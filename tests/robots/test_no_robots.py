@@ -20,6 +20,13 @@ WHY = "none of your classes has one"
 ASK = "Ask your teacher to add a robot to your class."
 
 
+@pytest.fixture(autouse=True)
+def _no_personal_sims(settings):
+    """As a server with personal sims switched off: a student whose classes have no robot has
+    none at all (with them on, "My sim" is hers: tests/robots/test_sims.py)."""
+    settings.SIMS_PER_USER = 0
+
+
 @pytest.fixture
 def nora():
     """A student of class-a; the one robot belongs to class-b."""

@@ -100,6 +100,7 @@
           if (failed) return;
           if (canEdit) saveAnswered(response.headers.get("X-Revision"));
           else say(gettext("Started"), "saved");
+          mySimMade(response.headers.get("X-Robot"));
           var id = response.headers.get("X-Run");
           return response.text().then(function (html) { showRun(id, html); });
         });
@@ -332,6 +333,14 @@
       loadPanel();
     });
     robotChoice.addEventListener("change", loadPanel);
+    // "My sim (new)" ran: the sim made for it is the choice from now on, and its panel shows.
+    function mySimMade(name) {
+      var chosen = robotChoice.options[robotChoice.selectedIndex];
+      if (!name || !chosen || chosen.value !== "+sim") return;
+      chosen.value = name;
+      chosen.textContent = name + " (" + gettext("my sim") + ")";
+      loadPanel();
+    }
     loadPanel();
   });
 })();
