@@ -134,6 +134,8 @@ def world_shares(request: HttpRequest, world_id: int) -> HttpResponse:
     if request.method == "POST":
         target = request.POST.get("target", "").strip()
         kind, _sep, name = target.partition(":") if ":" in target else ("user", "", target)
+        if target == "everyone":
+            kind = "everyone"
         try:
             share = add_share(
                 world, request.user, user=name.strip() if kind == "user" else "",

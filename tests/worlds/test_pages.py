@@ -112,6 +112,9 @@ def test_share_page(people):
     share = world.shares.get()
     alice.post(f"/worlds/{world.pk}/shares/{share.pk}/delete")
     assert signed_in(people["bob"]).get(f"/worlds/{world.pk}.json").status_code == 404
+    page = alice.post(f"/worlds/{world.pk}/shares/", {"target": "everyone"}, follow=True)
+    assert "Shared with everyone" in page.content.decode()
+    assert signed_in(people["carol"]).get(f"/worlds/{world.pk}.json").status_code == 200
     refused = alice.post(f"/worlds/{world.pk}/shares/", {"target": "user:alice"}, follow=True)
     assert "always shared with its owner" in refused.content.decode()
 
