@@ -1,0 +1,69 @@
+"""The world editor's pages (templates/worlds/editor.html, robotide/static/robotide/
+world_editor.js).
+
+The page carries the document; the script draws and edits it and saves it through the worlds
+API, which validates it. A world its reader may not change, and a built-in one, is shown to
+read, with "Copy to edit": the copy is saved as a new world of the reader's.
+"""
+
+import math
+
+from django.contrib.auth.decorators import login_required
+from django.http import Http404
+from django.shortcuts import render
+from django.urls import reverse
+from django.utils.translation import gettext as _
+
+from worlds.access import OWN, get_world_for_user, worlds_for_user
+from worlds.documents import builtin_worlds
+
+BLANK_SIZE = 4.0  # m: a new world's arena, as the built-in ones
+
+
+def blank_document() -> dict:
+    return {
+        "format": 1,
+        "name": "",
+        "title": "",
+        "size": {"width": BLANK_SIZE, "height": BLANK_SIZE},
+        "walls": [],
+        "boxes": [],
+        "landmarks": [],
+        "lines": [],
+        "zones": [],
+        "start": [{"x": 0.0, "y": 0.0, "theta": round(math.pi / 2, 4)}],
+    }
+
+
+def editor(request, document: dict, *, world_id=None, can_edit: bool, heading: str):
+    data = {
+        "world": document,
+        "id": world_id,
+        "can_edit": can_edit,
+        "api": "/api/worlds",
+        "edit_url": reverse("world-edit", args=[0]),
+    }
+    return render(request, "worlds/editor.html", {"editor": data, "heading": heading,
+                                                   "can_edit": can_edit})  # fmt: skip
+
+
+@login_required
+def world_new(request):
+    return editor(request, blank_document(), can_edit=True, heading=_("New world"))
+
+
+@login_required
+def world_edit(request, world_id: int):
+    world = get_world_for_user(request.user, world_id)
+    can_edit = worlds_for_user(request.user, OWN).filter(pk=world.pk).exists()
+    document = {**world.document, "name": world.name, "title": world.title or world.name}
+    return editor(request, document, world_id=world.pk, can_edit=can_edit,
+                  heading=world.title or world.name)  # fmt: skip
+
+
+@login_required
+def world_builtin(request, name: str):
+    document = builtin_worlds().get(name)
+    if document is None:
+        raise Http404(_("No such world."))
+    return editor(request, document, can_edit=False, heading=document.get("title") or name)
