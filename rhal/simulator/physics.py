@@ -20,10 +20,9 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from rhal.kinematics import advance_pose, normalize_angle
-from rhal.simulator.world import World, _point_segment_distances
+from rhal.simulator.geometry import Edges
+from rhal.simulator.world import World
 
 Pose = tuple[float, float, float]
 
@@ -31,7 +30,8 @@ STEP = 0.01  # m: the most a step travels; far thinner than any wall or box
 SKIN = 1e-9  # m: stop this short of a contact so rounding never puts the robot inside
 SLIDES = 4  # contacts resolved per step (corners need more than one)
 BUMPER_REACH = 1e-3  # m: the bumper reads pressed this close to a surface
-MAX_STEPS = 50_000  # per update: an absurdly long unread stretch in contact is cut short
+LOOKAHEAD = 200  # steps whose reachable edges are picked out at once
+MAX_STEPS = 10_000  # per update (100 m in contact): a longer unread stretch is cut short
 
 
 class Motion:
@@ -87,7 +87,7 @@ class Motion:
         return self.world.clearance(pose[0], pose[1])
 
     def bumper(self, pose: Pose) -> bool:
-        return self.clearance(pose) <= self.radius + BUMPER_REACH
+        return self.world.edges.nearest(pose[0], pose[1]) <= self.radius + BUMPER_REACH
 
     # -- stepping ----------------------------------------------------------------------------
 
@@ -100,66 +100,67 @@ class Motion:
             return self._pose, self._distance, (0.0, 0.0) if elapsed > 0 else self._moving
         if linear == 0.0:  # turning on the spot: never touches anything, exact from the origin
             x, y, theta = self._pose
-            return (
-                (x, y, normalize_angle(theta + angular * elapsed)),
-                self._distance,
-                (0.0, angular),
-            )
+            turned = normalize_angle(theta + angular * elapsed)
+            return (x, y, turned), self._distance, (0.0, angular)
         step = STEP / abs(linear)
-        whole = math.floor(elapsed / step)
-        moving = self._commit_steps(whole, step, now)
+        moving = self._commit_steps(math.floor(elapsed / step), step)
         pose, distance = self._pose, self._distance
         rest = elapsed - self._steps * step
         if rest > 0:
-            segments = self._near(pose, abs(linear) * rest)
-            pose, fraction = self._step(pose, linear, angular, rest, segments)
-            distance += abs(linear) * rest * fraction
+            travel = abs(linear) * rest
+            if self.world.edges.nearest(pose[0], pose[1]) - self.radius > travel + SKIN:
+                pose, fraction = advance_pose(*pose, linear, angular, rest), 1.0
+            else:
+                edges = self.world.edges.near(pose[0], pose[1], self.radius + travel + 0.02)
+                pose, fraction = self._step(pose, linear, angular, rest, edges)
+            distance += travel * fraction
             moving = (linear * fraction, angular)
             if commit:
                 self._pose, self._distance = pose, distance
         return pose, distance, moving
 
-    def _commit_steps(self, whole: int, step: float, now: float) -> tuple[float, float]:
+    def _commit_steps(self, whole: int, step: float) -> tuple[float, float]:
         """Commit the grid steps up to step number ``whole``; the speeds of the last one."""
         linear, angular = self._command
         moving = self._moving
-        if self._steps >= whole:
-            return moving
-        travel = abs(linear) * step * (whole - self._steps)
-        segments = self._near(self._pose, travel)
         done = 0
         while self._steps < whole:
             left = whole - self._steps
-            jump = self._free_steps(segments, step, left)
-            if jump >= 2:
-                self._pose = advance_pose(*self._pose, linear, angular, jump * step)
-                self._distance += abs(linear) * step * jump
-                self._steps += jump
-                moving = (linear, angular)
-                continue
-            self._pose, fraction = self._step(self._pose, linear, angular, step, segments)
-            self._distance += abs(linear) * step * fraction
-            self._steps += 1
-            moving = (linear * fraction, angular)
-            done += 1
-            stuck = fraction == 0.0 and angular == 0.0  # pushing straight in: stays so
-            if stuck or done >= MAX_STEPS:
+            # The edges within reach of the next few hundred steps (or all that are left).
+            reach = abs(linear) * step * min(left, LOOKAHEAD)
+            edges = self.world.edges.near(self._pose[0], self._pose[1], self.radius + reach + 0.02)
+            batch_end = self._steps + min(left, LOOKAHEAD)
+            while self._steps < batch_end:
+                jump = self._free_steps(edges, step, batch_end - self._steps)
+                if jump >= 2:
+                    self._pose = advance_pose(*self._pose, linear, angular, jump * step)
+                    self._distance += abs(linear) * step * jump
+                    self._steps += jump
+                    moving = (linear, angular)
+                    continue
+                self._pose, fraction = self._step(self._pose, linear, angular, step, edges)
+                self._distance += abs(linear) * step * fraction
+                self._steps += 1
+                moving = (linear * fraction, angular)
+                done += 1
+                if fraction == 0.0 and angular == 0.0:  # pushing straight in: it stays so
+                    self._steps = whole
+                    return (0.0, 0.0)
+            if done >= MAX_STEPS:  # cut short: the rest of the time it stays where it got to
                 self._steps = whole
-                if stuck:
-                    moving = (0.0, 0.0)
         return moving
 
-    def _free_steps(self, segments: np.ndarray, step: float, left: int) -> int:
+    def _free_steps(self, edges: Edges, step: float, left: int) -> int:
         """How many of the next ``left`` steps surely touch nothing."""
         linear, angular = self._command
         x, y, theta = self._pose
-        if not len(segments):
+        free = edges.nearest(x, y) - self.radius
+        if free == math.inf:  # nothing within reach of all of them
             return left
-        free = float(_point_segment_distances(x, y, segments).min()) - self.radius
         steps = math.floor(free / (abs(linear) * step)) - 1
         if steps >= left:
             return left
-        if angular and steps < left:
+        if angular and free > STEP:
             # The whole circle of the arc clear: the robot can go round it forever.
             turn = linear / angular
             cx, cy = x - turn * math.sin(theta), y + turn * math.cos(theta)
@@ -167,15 +168,8 @@ class Motion:
                 return left
         return max(steps, 0)
 
-    def _near(self, pose: Pose, travel: float) -> np.ndarray:
-        """The edges the robot could touch within ``travel`` metres of ``pose``."""
-        segments = self.world.segments
-        reach = self.radius + travel + 0.02
-        distances = _point_segment_distances(pose[0], pose[1], segments)
-        return segments[distances <= reach]
-
     def _step(
-        self, pose: Pose, linear: float, angular: float, dt: float, segments: np.ndarray
+        self, pose: Pose, linear: float, angular: float, dt: float, edges: Edges
     ) -> tuple[Pose, float]:
         """One step along the arc, sliding on contacts: (the new pose, fraction of the
         commanded travel made)."""
@@ -190,21 +184,20 @@ class Motion:
         for _ in range(SLIDES):
             if dx == 0.0 and dy == 0.0:
                 break
-            t, normal = first_contact(segments, self.radius, x, y, dx, dy)
+            t, normal = edges.first_contact(self.radius, x, y, dx, dy)
             if t >= 1.0:
                 x, y = x + dx, y + dy
                 dx = dy = 0.0
                 break
             free = False
-            length = math.hypot(dx, dy)
-            t = max(0.0, t - SKIN / length)
+            t = max(0.0, t - SKIN / math.hypot(dx, dy))
             x, y = x + dx * t, y + dy * t
             dx, dy = dx * (1 - t), dy * (1 - t)
             normals.append(normal)
             dx, dy = _slide(dx, dy, normals)
         if free:
             return target, 1.0
-        if len(segments) and _point_segment_distances(x, y, segments).min() < self.radius - 1e-7:
+        if edges.nearest(x, y) < self.radius - 1e-7:
             x, y = pose[0], pose[1]  # rounding never puts the robot inside: it stays instead
         moved = math.hypot(x - pose[0], y - pose[1])
         if moved < 1e-12:  # pushing straight in: not a crumb of travel
@@ -225,52 +218,3 @@ def _slide(dx: float, dy: float, normals: list[tuple[float, float]]) -> tuple[fl
     if any(dx * nx + dy * ny < -1e-12 for nx, ny in normals):
         return 0.0, 0.0
     return dx, dy
-
-
-def first_contact(
-    segments: np.ndarray, radius: float, x: float, y: float, dx: float, dy: float
-) -> tuple[float, tuple[float, float]]:
-    """When a circle of ``radius`` at (x, y) moving by (dx, dy) first touches a segment, as a
-    fraction of the move (inf: never), and the contact normal pointing to the circle."""
-    if not len(segments):
-        return math.inf, (0.0, 0.0)
-    ax, ay, bx, by = segments.T
-    ex, ey = bx - ax, by - ay
-    length = np.hypot(ex, ey)
-    ux, uy = ex / length, ey / length
-    nx, ny = -uy, ux
-    move = math.hypot(dx, dy)
-    tiny = 1e-9 * move
-    # The faces: the centre reaching the line offset by the radius, between the segment's ends.
-    s0 = (x - ax) * nx + (y - ay) * ny
-    dn = dx * nx + dy * ny
-    side = np.where(s0 > 0, 1.0, np.where(s0 < 0, -1.0, -np.sign(dn)))
-    approaching = side * dn < -tiny
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_face = np.where(approaching, (side * radius - s0) / dn, np.inf)
-    t_face = np.maximum(t_face, 0.0)
-    with np.errstate(invalid="ignore"):  # inf * 0 where nothing is approached
-        along = (x + dx * t_face - ax) * ux + (y + dy * t_face - ay) * uy
-    t_face = np.where(approaching & (along >= 0) & (along <= length), t_face, np.inf)
-    # The ends: the centre reaching a circle of the radius around each end point.
-    ends = np.concatenate([segments[:, 0:2], segments[:, 2:4]])
-    fx, fy = x - ends[:, 0], y - ends[:, 1]
-    a = move * move
-    b = fx * dx + fy * dy
-    c = fx * fx + fy * fy - radius * radius
-    closing = b < -tiny * np.sqrt(fx * fx + fy * fy)
-    disc = b * b - a * c
-    with np.errstate(invalid="ignore"):
-        t_end = np.where(closing & (disc >= 0), (-b - np.sqrt(np.maximum(disc, 0.0))) / a, np.inf)
-    t_end = np.where(closing & (c <= 0), 0.0, t_end)
-    t_end = np.where(t_end >= 0, t_end, np.inf)
-    i_face, i_end = int(np.argmin(t_face)), int(np.argmin(t_end))
-    if t_face[i_face] <= t_end[i_end]:
-        t = float(t_face[i_face])
-        if not math.isfinite(t):
-            return math.inf, (0.0, 0.0)
-        return t, (float(side[i_face] * nx[i_face]), float(side[i_face] * ny[i_face]))
-    t = float(t_end[i_end])
-    px, py = x + dx * t - ends[i_end, 0], y + dy * t - ends[i_end, 1]
-    norm = math.hypot(px, py) or 1.0
-    return t, (px / norm, py / norm)

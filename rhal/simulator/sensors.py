@@ -26,20 +26,6 @@ from rhal.simulator.world import World
 FLOOR_SENSOR_AHEAD = 0.1  # m in front of the robot's centre
 
 
-def ray_hits(segments: np.ndarray, x: float, y: float, angles: np.ndarray) -> np.ndarray:
-    """Distance along each ray from (x, y) to the first segment it meets (inf: none)."""
-    rx, ry = np.cos(angles)[:, None], np.sin(angles)[:, None]
-    ax, ay, bx, by = (column[None, :] for column in segments.T)
-    sx, sy = bx - ax, by - ay
-    qx, qy = ax - x, ay - y
-    denom = rx * sy - ry * sx
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (qx * sy - qy * sx) / denom
-        u = (qx * ry - qy * rx) / denom
-    hit = (denom != 0) & (t >= 0) & (u >= 0) & (u <= 1)
-    return np.where(hit, t, np.inf).min(axis=1, initial=np.inf)
-
-
 @dataclass(frozen=True)
 class Cone:
     """A range sensor's beam: ``width`` radians, ``rays`` rays, readings in [low, high]."""
@@ -97,7 +83,7 @@ class SensorModel:
         """The nearest echo in the cone around each heading, clamped to the cone's range."""
         cone = self.cone
         angles = (headings[:, None] + self._offsets[None, :]).ravel()
-        hits = ray_hits(self.world.segments, x, y, angles).reshape(len(headings), -1)
+        hits = self.world.edges.ray_hits(x, y, angles).reshape(len(headings), -1)
         nearest = hits.min(axis=1)
         if cone.width > 0 and len(self._corners):
             nearest = np.minimum(nearest, self._corner_echoes(x, y, headings))
@@ -120,7 +106,7 @@ class SensorModel:
         # A corner behind another surface is hidden: it echoes only if no edge is nearer along
         # its bearing (a ray to it stops at it or just after).
         candidates = np.where(inside.any(axis=0))[0]
-        blocked = ray_hits(self.world.segments, x, y, bearing[candidates])
+        blocked = self.world.edges.ray_hits(x, y, bearing[candidates])
         visible = np.full(len(bearing), False)
         visible[candidates] = blocked >= distance[candidates] - 1e-9
         echo = np.where(inside & visible[None, :], distance[None, :], np.inf)

@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from rhal.simulator.geometry import Edges
+
 FORMAT = 1
 LIMITS = {"walls": 500, "boxes": 200, "lines": 100, "zones": 50, "landmarks": 50, "start": 20}
 MAX_LINE_POINTS = 500
@@ -180,12 +182,13 @@ class World:
     robot: RobotSpec = field(default_factory=RobotSpec)
     #: obstacle edges (N, 4): x1, y1, x2, y2, the arena's own walls first
     segments: np.ndarray = field(init=False, repr=False, compare=False)
+    #: the same edges with their directions and lengths worked out (rhal.simulator.geometry)
+    edges: Edges = field(init=False, repr=False, compare=False)
     #: obstacles as convex quadrilaterals (M, 4, 2), counter-clockwise: walls, then boxes
     quads: np.ndarray = field(init=False, repr=False, compare=False)
-    #: painted line pieces (K, 4) with their half widths (K,) and line index (K,)
-    _strokes: tuple[np.ndarray, np.ndarray, np.ndarray] = field(
-        init=False, repr=False, compare=False
-    )
+    _quad_edges: tuple[np.ndarray, ...] = field(init=False, repr=False, compare=False)
+    #: painted line pieces, their half widths and the index of the line each is part of
+    _strokes: tuple[Edges, np.ndarray, np.ndarray] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         hw, hh = self.half_width, self.half_height
@@ -195,7 +198,16 @@ class World:
         ]
         edges = [(*q[i], *q[(i + 1) % 4]) for q in quads for i in range(4)]
         object.__setattr__(self, "segments", np.array(outer + edges, dtype=float))
-        object.__setattr__(self, "quads", np.array(quads, dtype=float).reshape(-1, 4, 2))
+        object.__setattr__(self, "edges", Edges(self.segments))
+        corners = np.array(quads, dtype=float).reshape(-1, 4, 2)
+        object.__setattr__(self, "quads", corners)
+        following = np.roll(corners, -1, axis=1)
+        object.__setattr__(
+            self,
+            "_quad_edges",
+            (corners[..., 0], corners[..., 1], following[..., 0] - corners[..., 0],
+             following[..., 1] - corners[..., 1]),
+        )  # fmt: skip
         strokes, halves, owners = [], [], []
         for index, line in enumerate(self.lines):
             for a, b in zip(line.points, line.points[1:], strict=False):
@@ -206,7 +218,7 @@ class World:
             self,
             "_strokes",
             (
-                np.array(strokes, dtype=float).reshape(-1, 4),
+                Edges(np.array(strokes, dtype=float).reshape(-1, 4)),
                 np.array(halves, dtype=float),
                 np.array(owners, dtype=int),
             ),
@@ -229,7 +241,7 @@ class World:
     def clearance(self, x: float, y: float) -> float:
         """Distance from a point to the nearest obstacle surface (walls, boxes, the arena's
         walls); negative inside an obstacle or outside the arena."""
-        nearest = float(_point_segment_distances(x, y, self.segments).min())
+        nearest = self.edges.nearest(x, y)
         if self.inside_obstacle(x, y) or abs(x) > self.half_width or abs(y) > self.half_height:
             return -nearest
         return nearest
@@ -238,19 +250,14 @@ class World:
         """True if the point is strictly inside a wall or a box."""
         if not len(self.quads):
             return False
-        a = self.quads
-        b = np.roll(a, -1, axis=1)
-        cross = (b[..., 0] - a[..., 0]) * (y - a[..., 1]) - (b[..., 1] - a[..., 1]) * (
-            x - a[..., 0]
-        )
+        ax, ay, ex, ey = self._quad_edges
+        cross = ex * (y - ay) - ey * (x - ax)
         return bool((cross > 0).all(axis=1).any())
 
     def ray_distance(self, x: float, y: float, theta: float, max_range: float) -> float:
         """Distance along ``theta`` from a point to the first obstacle surface, at most
         ``max_range``."""
-        from rhal.simulator.sensors import ray_hits
-
-        hits = ray_hits(self.segments, x, y, np.array([theta]))
+        hits = self.edges.ray_hits(x, y, np.array([theta]))
         return float(min(hits[0], max_range))
 
     def zone_at(self, x: float, y: float) -> str | None:
@@ -270,7 +277,7 @@ class World:
                 break
         strokes, halves, owners = self._strokes
         if len(strokes):
-            on = _point_segment_distances(x, y, strokes) <= halves
+            on = strokes.distances(x, y) <= halves
             if on.any():
                 colour = self.lines[int(owners[on].max())].colour  # the last drawn is on top
         return colour_name(colour), colour, light_percent(colour)
@@ -359,17 +366,6 @@ def _ccw(corners: tuple[Point, ...]) -> list[Point]:
     if (bx - ax) * (cy - ay) - (by - ay) * (cx - ax) < 0:
         return list(reversed(corners))
     return list(corners)
-
-
-def _point_segment_distances(x: float, y: float, segments: np.ndarray) -> np.ndarray:
-    """Distance from a point to each segment (N, 4)."""
-    ax, ay, bx, by = segments.T
-    dx, dy = bx - ax, by - ay
-    length2 = dx * dx + dy * dy
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.where(length2 > 0, ((x - ax) * dx + (y - ay) * dy) / length2, 0.0)
-    t = np.clip(t, 0.0, 1.0)
-    return np.hypot(ax + t * dx - x, ay + t * dy - y)
 
 
 # -- parsing and validation ----------------------------------------------------------------
