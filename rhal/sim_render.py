@@ -13,6 +13,7 @@ frame is first asked for.
 
 from __future__ import annotations
 
+import functools
 import io
 import math
 from dataclasses import dataclass
@@ -123,12 +124,21 @@ def layout_for(world: World, size: tuple[int, int]) -> Layout:
     if beside >= under:
         centre = ((width - PANEL_SIDE) / 2, height / 2)
         return Layout(beside, centre, (width - PANEL_SIDE + 6, MARGIN), True)
-    centre = (width / 2, (height - PANEL_BELOW) / 2)
-    return Layout(under, centre, (MARGIN, height - PANEL_BELOW + 3), False)
+    # The map with the panel right under it, the two centred in the frame's height.
+    map_height = world.height * under + 2 * MARGIN
+    above = (height - map_height - PANEL_BELOW) / 2
+    centre = (width / 2, above + map_height / 2)
+    return Layout(under, centre, (MARGIN, round(above + map_height + 3)), False)
 
 
+@functools.lru_cache(maxsize=1)
 def _font() -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
-    return ImageFont.load_default()
+    """DejaVu Sans (Debian's fonts-dejavu-core) writes a teacher's zone names with their
+    accents, and Greek and Cyrillic; Pillow's own font has ASCII only."""
+    try:
+        return ImageFont.truetype("DejaVuSans.ttf", 10)
+    except OSError:
+        return ImageFont.load_default()
 
 
 def _still_layer(world: World, size: tuple[int, int], language: str):
@@ -181,8 +191,11 @@ def _still_layer(world: World, size: tuple[int, int], language: str):
         if zone.width * scale < MIN_LABELLED_PX:
             continue  # a speck in a large world: its name would hide its neighbours
         ink = INK if zone.colour is None or _luma(rgb(zone.colour)) > 110 else SIGN
+        name = label(zone.name)
         at = to_pixel(zone.x, zone.y + zone.height / 2)
-        draw.text((at[0], at[1] + 5), label(zone.name), fill=ink, font=_font(), anchor="mt")
+        half = _font().getlength(name) / 2 + 4  # kept inside the arena's walls
+        u = min(max(at[0], arena[0] + half), arena[2] - half)
+        draw.text((u, at[1] + 5), name, fill=ink, font=_font(), anchor="mt")
     return image, layout
 
 

@@ -103,13 +103,16 @@ def test_the_top_view_fits_any_arena(width, height, below):
     east, south = layout.pixel(world.half_width, -world.half_height)
     assert 0 <= west < east <= (320 if below else 320 - 80)
     assert 0 <= north < south <= (240 - 30 if below else 240)
-    # It fills its area to the margin across or down, and is centred in it.
-    area_width, area_height = (320, 210) if below else (240, 240)
-    across = west == pytest.approx(8) and east == pytest.approx(area_width - 8)
-    down = north == pytest.approx(8) and south == pytest.approx(area_height - 8)
+    # It fills the frame to the margin across or down; the panel is beside it or right under.
+    across = west == pytest.approx(8) and east == pytest.approx((320 if below else 240) - 8)
+    down = north == pytest.approx(8) and south == pytest.approx((240 - 30 if below else 240) - 8)
     assert across or down
-    assert (west + east) / 2 == pytest.approx(area_width / 2)
-    assert (north + south) / 2 == pytest.approx(area_height / 2)
+    panel_x, panel_y = layout.panel
+    if below:
+        assert south + 8 < panel_y <= south + 12 and panel_y + 30 <= 240 + 3
+        assert (north - 8) == pytest.approx(240 - (panel_y - 3 + 30), abs=1)  # centred
+    else:
+        assert panel_x > east + 8 and (north + south) / 2 == pytest.approx(120)
     image = top_view(world, world.start_pose, size=size, range_m=0.2)
     assert near(image.getpixel((round(west) + 5, round((north + south) / 2))), FLOOR)
     # The robot, drawn at least 3 px wide even in a 50 m world.
