@@ -99,6 +99,7 @@ def test_list_groups_worlds(people):
     assert public_at < html.index(f"/worlds/{public.pk}/edit") < builtin_at
     assert f"/worlds/{hidden.pk}/" not in html
     assert "/worlds/builtin/maze.json" in html and 'action="/worlds/new"' in html
+    assert 'href="/worlds/builtin/maze"' in html  # the editor's page, to read
     assert 'href="/worlds/"' in html  # the site menu
 
 
