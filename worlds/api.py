@@ -149,7 +149,7 @@ def stored_out(world: World, revision=None) -> dict:
 
 def builtin_out(name: str, document: dict) -> dict:
     return {
-        "id": BUILTIN_PREFIX + name, "name": name, "title": document.get("title", name),
+        "id": BUILTIN_PREFIX + name, "name": name, "title": documents.builtin_title(name),
         "builtin": True, "visibility": "builtin", "document": document,
     }  # fmt: skip
 

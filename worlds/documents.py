@@ -6,6 +6,7 @@ import re
 
 from django.utils.text import slugify
 from django.utils.translation import gettext as _
+from django.utils.translation import gettext_noop
 
 from worlds.models import MAX_DOCUMENT_BYTES
 
@@ -37,6 +38,22 @@ def builtin_worlds() -> dict[str, dict]:
     from rhal.simulator.worlds import BUILTIN
 
     return BUILTIN
+
+
+#: The built-in worlds' titles (rhal.simulator.worlds, in English there): shown translated.
+BUILTIN_TITLES = (
+    gettext_noop("Two boxes"),
+    gettext_noop("Empty square"),
+    gettext_noop("Maze"),
+    gettext_noop("Line track"),
+    gettext_noop("Rooms with doorways"),
+)
+
+
+def builtin_title(name: str) -> str:
+    """A built-in world's title in the reader's language (its own, if not one of ours)."""
+    title = builtin_worlds()[name].get("title") or name
+    return _(title) if title in BUILTIN_TITLES else title
 
 
 def document_size(document) -> int:

@@ -33,8 +33,8 @@ def world_list(request: HttpRequest) -> HttpResponse:
         else:  # with them, their classes, or (a teacher) their classes' worlds
             shared.append(world)
     builtin = [
-        {"name": name, "title": doc.get("title") or name}
-        for name, doc in documents.builtin_worlds().items()
+        {"name": name, "title": documents.builtin_title(name)}
+        for name in documents.builtin_worlds()
     ]
     context = {
         "mine": mine, "shared": shared, "public": public, "builtin": builtin,

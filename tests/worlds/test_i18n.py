@@ -36,6 +36,8 @@ def test_worlds_pages_in_portuguese(bia):
         assert page.status_code == 200 and page["Content-Language"] == "pt-br", url
         text = VisibleText.of(page.content.decode())
         assert "Mundos" in text, url
+        if url == "/worlds/":  # the built-in worlds' titles too
+            assert "Labirinto" in text and "Pista de linha" in text
         if english := english_in(text, patterns):
             found[url] = english
     assert not found, found
