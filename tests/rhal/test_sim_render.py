@@ -235,3 +235,20 @@ def test_the_painted_floor_is_where_the_camera_looks_from_any_heading(theta):
     focal = FRONT_SIZE[0] / 2 / math.tan(FOV / 2)
     red, _, blue = image.getpixel((round(320 + focal * 0.3), round(240 + focal * 0.2)))
     assert blue > red + 80
+
+
+def test_only_the_built_in_worlds_words_are_translated():
+    # The boxes world's zones are robotide's words (kitchen: cozinha in pt-BR); the same zones
+    # in a teacher's world are the teacher's words, drawn as written.
+    from rhal.simulator.worlds import BUILTIN
+
+    built_in = World.from_doc(BUILTIN["boxes"])
+    teachers = World.from_doc({**BUILTIN["boxes"], "name": "my-boxes"})
+    pose = built_in.start_pose
+
+    def drawn(world, language):
+        return render_top_view(world, pose, RADIUS, 1.0, False, (320, 240), language=language)
+
+    assert drawn(built_in, "en") == drawn(teachers, "en")
+    assert drawn(built_in, "pt-br") != drawn(teachers, "pt-br")
+    assert drawn(teachers, "pt-br") != drawn(teachers, "en")  # the panel's words still are
