@@ -23,6 +23,7 @@ from rhal.registry import driver_class
 from robotide.redirects import back
 from robots.bus import AgentUnavailable, ask_agent, blocking
 from robots.models import get_robot_for_user
+from robots.sims import touch
 
 SETTING = "start_each_run"
 
@@ -79,6 +80,7 @@ _reset_sync = blocking(reset)
 
 def reset_sync(robot, user, pose=None) -> None:
     """``reset`` from a view: whether the user may override a run is read here."""
+    touch(robot)  # a personal sim someone resets is in use (robots.sims: not idle)
     _reset_sync(robot, user, pose, override=robot.configurable_by(user))
 
 

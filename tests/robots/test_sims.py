@@ -20,6 +20,7 @@ from django.utils import timezone
 from programs.models import Program, Run
 from robotide.models import ApiToken, ClassTeacher
 from robots.models import Robot
+from tests.e2e.conftest import robot_on  # noqa: F401 - a fixture: a real agent on a peer
 
 pytestmark = pytest.mark.django_db
 
@@ -352,7 +353,10 @@ async def test_two_students_run_on_their_own_sims_at_once_nobody_queued(settings
             agent = manager.agents[name][0]
             await asyncio.wait_for(agent.ready.wait(), 60)
         robots = [await sync_to_async(Robot.objects.get)(name=name) for name in names]
-        runs = [await run_program(user, robot, HOLDS) for user, robot in zip((alice, bob), robots)]
+        runs = [
+            await run_program(user, robot, HOLDS)
+            for user, robot in zip((alice, bob), robots, strict=True)
+        ]
         for run in runs:
             await in_state(run, "running", timeout=60)
         states = await sync_to_async(lambda: [Run.objects.get(pk=r.pk) for r in runs])()
@@ -362,10 +366,56 @@ async def test_two_students_run_on_their_own_sims_at_once_nobody_queued(settings
         delete = sync_to_async(lambda: api(alice)("DELETE", f"/api/sims/{names[0]}"))
         status, answer = await delete()
         assert status == 409, answer
-        for run, name in zip(runs, names):
+        for run, name in zip(runs, names, strict=True):
             await let_end(manager.agents[name][0], run)
         assert (await delete())[0] == 204
         await until(lambda: names[0] not in manager.agents, what="its agent stopped")
         assert names[1] in manager.agents and not manager.agents[names[1]][1].done()
     finally:
         await manager.shutdown()
+
+
+@pytest.mark.django_db(transaction=True)
+async def test_a_twin_of_a_live_pioneer_has_the_ring_of_the_model_it_named(robot_on):  # noqa: F811
+    """Its settings name no model; the robot named itself an AmigoBot when its agent connected
+    (robot.state says so): the twin has an AmigoBot's ring of 8, not the driver's default
+    P3-DX ring of 16, and its options build the sim driver with that ring."""
+    from asgiref.sync import sync_to_async
+
+    import rhal
+
+    _peer, _agent, pioneer, student = await robot_on("pioneer", model="amigo-sh")
+    assert pioneer.settings == {}
+    twin = await sync_to_async(make_sim)(student, twin_of=pioneer.name)
+    options = twin["settings"]
+    assert options["sonar"] == [90, 41, 15, -15, -41, -90, -145, 145], options
+    assert options["range_cone_deg"] == 60.0  # the discs at ±15° that make its `range`
+    robot = await sync_to_async(Robot.objects.get)(name=twin["name"])
+    sim = rhal.connect(robot.url, **robot.driver_options())  # as its agent builds it
+    doc = sim.capabilities()["sim"]
+    assert list(doc["sonar"]) == options["sonar"], doc
+    assert sim.capabilities()["drive"] == {
+        "max_linear": options["max_linear"], "max_angular": options["max_angular"]
+    }  # fmt: skip
+
+
+def test_a_sim_chosen_watched_or_reset_is_in_use(school):
+    """What counts as use besides runs (robots.sims.touch): the workbench's panel, the robot's
+    page, a reset (its agent away here: the reset fails, the sim was used all the same)."""
+    alice = school["alice"]
+    name = make_sim(alice)["name"]
+    long_ago = timezone.now() - timedelta(minutes=90)
+    program = program_of(alice)
+    pages = signed_in(alice)
+    for use in (
+        lambda: pages.get(reverse("program-panel", args=[program.pk]), {"robot": name}),
+        lambda: pages.get(f"/robots/{name}/"),
+        lambda: api(alice)("POST", f"/api/robots/{name}/reset"),
+    ):
+        Robot.objects.filter(name=name).update(used=long_ago, created=long_ago)
+        use()
+        assert Robot.objects.get(name=name).used > long_ago
+    Robot.objects.filter(name=name).update(used=long_ago, created=long_ago)
+    from robots import sims
+
+    assert sims.reap_idle() == [name]
