@@ -58,21 +58,21 @@ def rgb(colour: str) -> tuple[int, int, int]:
 
 _kept: OrderedDict = OrderedDict()
 _kept_lock = threading.Lock()
-KEEP = 16  # worlds' worth of prepared drawings: a server's sims are in a few worlds
+KEEP = 16  # prepared drawings kept: a server's sims are in a few worlds
 
 
 def per_world(build, world: World, *key):
-    """``build(world, *key)``, made once for the last few worlds drawn (frames are drawn in
+    """``build(world, *key)``, made once for the last few worlds drawn. Worlds are frozen and
+    compared by value, so personal sims in the same stored world share it (frames are drawn in
     worker threads: hence the lock)."""
-    name = (build.__name__, id(world), *key)
+    name = (build.__name__, world, *key)
     with _kept_lock:
-        kept = _kept.get(name)
-        if kept is not None and kept[0] is world:
+        if name in _kept:
             _kept.move_to_end(name)
-            return kept[1]
+            return _kept[name]
     value = build(world, *key)
     with _kept_lock:
-        _kept[name] = (world, value)
+        _kept[name] = value
         while len(_kept) > KEEP:
             _kept.popitem(last=False)
     return value

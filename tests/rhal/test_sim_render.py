@@ -252,3 +252,17 @@ def test_only_the_built_in_worlds_words_are_translated():
     assert drawn(built_in, "en") == drawn(teachers, "en")
     assert drawn(built_in, "pt-br") != drawn(teachers, "pt-br")
     assert drawn(teachers, "pt-br") != drawn(teachers, "en")  # the panel's words still are
+
+
+def test_what_is_prepared_per_world_is_shared_by_equal_worlds(monkeypatch):
+    # Each personal sim loads its stored world anew: equal worlds share the prepared drawing.
+    import rhal.sim_front
+
+    built = []
+    real = rhal.sim_front._scene
+    monkeypatch.setattr(rhal.sim_front, "_scene", lambda world: built.append(world) or real(world))
+    monkeypatch.setattr(rhal.sim_front, "_kept", type(rhal.sim_front._kept)())
+    for _ in range(3):
+        front(World.from_doc(DRAWING), World.from_doc(DRAWING).start_pose)
+    front(World.from_doc({**DRAWING, "boxes": []}), World.from_doc(DRAWING).start_pose)
+    assert len(built) == 2
