@@ -14,6 +14,18 @@ TEXTS = (
     gettext_noop("turn-rate limit, rad/s"),
     gettext_noop("the walled arena the robot starts in"),
     gettext_noop("the language of the words drawn on its camera's picture"),
+    gettext_noop(
+        "the world it runs in: a built-in one (boxes, square, maze, line, rooms) or a stored "
+        "world's name or number"
+    ),
+    gettext_noop("the old name of the world option"),
+    gettext_noop("how many times faster than real time it runs, 1 to 10"),
+    gettext_noop(
+        "angles of a sonar ring, degrees to the left of ahead (90,45,0,-45,-90); blank: the "
+        "world's robot's"
+    ),
+    gettext_noop("a floor colour sensor under its nose; blank: the world's robot's"),
+    gettext_noop("the range sensor's beam width, degrees; blank: the world's robot's"),
     gettext_noop("record the tones to this WAV file instead of playing them"),
     gettext_noop("sound device name or index (blank: the system's output)"),
     gettext_noop("Hz (blank: 8000 for a WAV, 44100 for a device)"),
