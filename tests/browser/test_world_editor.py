@@ -9,6 +9,7 @@ import pytest
 from playwright.sync_api import Page, expect
 
 from tests.appliance import wait_for
+from tests.browser.test_accessibility import AXE, AXE_URL, axe_violations
 from tests.browser.test_pages import sign_in
 
 WALL_EXAMPLE = "programs/examples/wall.py"
@@ -188,6 +189,9 @@ def test_the_editor_fits_and_draws_by_touch(new_page, appliance, width, screensh
     touch_drag(page, (0.0, -1.2), (1.0, -1.2))  # a second start pose, facing east
     expect(drawn(page, "start")).to_have_count(2)
     expect(page.get_by_label("Heading (°, 0 = east, 90 = north)")).to_have_value("0")
+    button(page, "Line").tap()
+    touch_drag(page, (-1.5, -1.6), (1.5, -1.0))
+    expect(drawn(page, "lines")).to_have_count(1)
     overflow = page.evaluate("document.documentElement.scrollWidth - window.innerWidth")
     assert overflow <= 0, f"{overflow} px wider than the screen"
     toolbar = page.get_by_role("toolbar").bounding_box()
@@ -225,10 +229,10 @@ def test_a_sim_in_the_drawn_world_stops_before_the_drawn_wall(page, appliance, s
     world_id = save(page)
     screenshot(page, "world-editor-wall-ahead")
 
-    robot = "drawnwall"
-    body = {"name": robot, "url": f"sim://?world={world_id}"}
-    response = appliance.api("POST", "/api/robots", body)
+    # A sim of one's own in that world (sim://?world=<id>), as a teacher tries one.
+    response = appliance.api("POST", "/api/sims", {"world": world_id})
     assert response.status_code == 201, response.text
+    robot = response.json()["name"]
     wait_for(lambda: appliance.api("GET", f"/api/robots/{robot}/sensors").status_code == 200,
              what="the new sim's agent")  # fmt: skip
     start = appliance.api("GET", f"/api/robots/{robot}/sensors").json()["position"]
@@ -244,3 +248,30 @@ def test_a_sim_in_the_drawn_world_stops_before_the_drawn_wall(page, appliance, s
     assert abs(end["x"]) < 0.05, end
     distance = float(re.search(r"Stopped (\d\.\d+) m before the wall", log).group(1))
     assert 0.3 < distance <= 0.5
+
+
+def test_the_editor_passes_axe_and_works_from_the_keyboard(page, appliance):
+    """No serious axe-core violation with an item selected and refused; a wall added, moved
+    and deleted with the keyboard alone."""
+    page.route(f"**{AXE_URL}", lambda r: r.fulfill(path=AXE, content_type="text/javascript"))
+    new_world(page, "By keys")
+    button(page, "Select").focus()
+    page.keyboard.press("ArrowRight")  # the toolbar's arrows: to Wall
+    expect(button(page, "Wall")).to_be_focused()
+    page.keyboard.press("Enter")
+    expect(button(page, "Wall")).to_have_attribute("aria-pressed", "true")
+    page.locator("#we-canvas").focus()
+    page.keyboard.press("Enter")  # a wall in the middle, its first field focused
+    expect(drawn(page, "walls")).to_have_count(1)
+    expect(page.locator("#we-f-from-x")).to_be_focused()
+    page.locator("#we-f-to-x").fill("2.5")
+    page.locator("#we-f-to-x").press("Enter")
+    button(page, "Save").click()
+    expect(page.locator('#we-form .we-field[data-key="to"] .we-error')).to_be_visible()
+    found = axe_violations(page)
+    assert not found, found
+    page.locator("#we-canvas").focus()
+    page.keyboard.press("ArrowUp")
+    expect(page.locator("#we-f-from-y")).to_have_value("0.1")
+    page.keyboard.press("Delete")
+    expect(drawn(page, "walls")).to_have_count(0)

@@ -756,8 +756,10 @@
       else if (refusal.kind === null && refusal.field) selected = null;
       render();
       buildForm();
-      var shown = document.getElementById("we-error");
-      if (shown) shown.scrollIntoView({ block: "nearest" });
+      // The field to mend, if the message names one; else the message, in view.
+      var invalid = form.querySelector("input[aria-invalid=true]");
+      if (invalid) invalid.focus();
+      else if (document.getElementById("we-error")) document.getElementById("we-error").scrollIntoView({ block: "nearest" });
     }
 
     // The API's refusal as {kind, index, field, message}: its detail is a list of
