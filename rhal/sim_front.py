@@ -198,11 +198,10 @@ def front_view(
     wall_t, wall_face = _cast(scene.walls, camera, dx, dy)
     box_t, box_face = _cast(scene.boxes, camera, dx, dy)
 
-    rows = np.arange(height, dtype=np.float32)[:, None] + 0.5
     pixels = _backdrop(scene, camera, theta, focal, size)
     wall_depth = np.maximum(wall_t * cos_offsets, NEAR)
     colours = scene.wall_colours[wall_face]
-    pixels = _paint_band(pixels, rows, wall_depth, WALL_HEIGHT, focal, centre[1], colours)
+    pixels = _paint_band(pixels, wall_depth, WALL_HEIGHT, focal, centre[1], colours)
     image = Image.fromarray(pixels, "RGB")
     for landmark in scene.landmarks:  # boxes, drawn next, hide what they stand in front of
         _draw_landmark(image, landmark, camera, theta, focal, centre, (dx, dy), wall_t)
@@ -210,9 +209,7 @@ def front_view(
     if in_front.any():
         box_depth = np.maximum(np.where(in_front, box_t, np.inf) * cos_offsets, NEAR)
         colours = scene.box_colours[box_face]
-        pixels = _paint_band(
-            np.asarray(image), rows, box_depth, BOX_HEIGHT, focal, centre[1], colours
-        )
+        pixels = _paint_band(np.array(image), box_depth, BOX_HEIGHT, focal, centre[1], colours)
         image = Image.fromarray(pixels, "RGB")
     return image
 
@@ -307,15 +304,23 @@ def _backdrop(scene: Scene, camera, theta: float, focal: float, size) -> np.ndar
     return out
 
 
-def _paint_band(pixels, rows, depth, top_height, focal, centre_v, colours) -> np.ndarray:
-    """Paint, in each column, the rows between the floor and ``top_height`` at ``depth``."""
+def _paint_band(pixels, depth, top_height, focal, centre_v, colours) -> np.ndarray:
+    """Paint, in each column, the rows between the floor and ``top_height`` at ``depth`` (inf:
+    nothing there); a copy if ``pixels`` is read-only."""
+    out = pixels if pixels.flags.writeable else pixels.copy()
+    height = out.shape[0]
+    # Rows whose centre (row + 0.5) is in [top, bottom): a slice a column, far cheaper than
+    # a mask over the whole frame.
     top = centre_v - focal * (top_height - FRONT_CAMERA_HEIGHT) / depth
     bottom = centre_v + focal * FRONT_CAMERA_HEIGHT / depth
-    band = (rows >= top[None, :]) & (rows < bottom[None, :])
+    first = np.clip(np.ceil(top - 0.5), 0, height).astype(int)
+    last = np.clip(np.ceil(bottom - 0.5), 0, height).astype(int)
     # Farther is dimmer, a little: it helps the eye, not the decoder.
     light = np.clip(1.05 - 0.06 * depth, 0.75, 1.0)[:, None]
     shaded = (colours * light).astype(np.uint8)
-    return np.where(band[:, :, None], shaded[None, :, :], pixels)
+    for column in np.flatnonzero(last > first):
+        out[first[column] : last[column], column] = shaded[column]
+    return out
 
 
 def _draw_landmark(image, landmark: Placed, camera, theta, focal, centre, rays, nearest) -> None:
