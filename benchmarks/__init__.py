@@ -23,4 +23,5 @@ BENCHMARKS = (
     "fleet",
     "classroom",
     "sims",
+    "sim_view",
 )

@@ -187,7 +187,8 @@ class RobotConsumer(SayOnSocket, DirectDispatch, AsyncWebsocketConsumer):
         if not await self.still_allowed():
             return
         pose = {k: v for k, v in event.items() if k in POSE}
-        await self.send(json.dumps({"pose": pose}, separators=(",", ":")))
+        frame = {"type": "robot.pose", "pose": pose}
+        await self.send(json.dumps(frame, separators=(",", ":")))
 
     async def _shows_seen(self) -> dict:
         """The shown values this viewer sees: ended runs' only if they may see the run."""
