@@ -195,12 +195,15 @@ def front_view(
     cos_offsets = np.cos(offsets)
     directions = theta - offsets
     dx, dy = np.cos(directions), np.sin(directions)
-    wall_t, wall_face = _cast(scene.walls, camera, dx, dy)
-    box_t, box_face = _cast(scene.boxes, camera, dx, dy)
+    half_view = math.atan(centre[0] / focal) + 0.01
+    walls = _in_view(scene.walls, camera, theta, half_view)
+    boxes = _in_view(scene.boxes, camera, theta, half_view)
+    wall_t, wall_face = _cast(scene.walls[walls], camera, dx, dy)
+    box_t, box_face = _cast(scene.boxes[boxes], camera, dx, dy)
 
     pixels = _backdrop(scene, camera, theta, focal, size)
     wall_depth = np.maximum(wall_t * cos_offsets, NEAR)
-    colours = scene.wall_colours[wall_face]
+    colours = scene.wall_colours[walls][wall_face]
     pixels = _paint_band(pixels, wall_depth, WALL_HEIGHT, focal, centre[1], colours)
     image = Image.fromarray(pixels, "RGB")
     for landmark in scene.landmarks:  # boxes, drawn next, hide what they stand in front of
@@ -208,10 +211,25 @@ def front_view(
     in_front = box_t < wall_t
     if in_front.any():
         box_depth = np.maximum(np.where(in_front, box_t, np.inf) * cos_offsets, NEAR)
-        colours = scene.box_colours[box_face]
+        colours = scene.box_colours[boxes][box_face]
         pixels = _paint_band(np.array(image), box_depth, BOX_HEIGHT, focal, centre[1], colours)
         image = Image.fromarray(pixels, "RGB")
     return image
+
+
+def _in_view(faces: np.ndarray, camera, theta: float, half_view: float) -> np.ndarray:
+    """Which faces may be in view: all but those with both ends behind the lens, or both
+    beyond the same edge of the view (a world of 500 walls has most of its faces elsewhere)."""
+    px = faces[:, 0::2] - camera[0]  # (N, 2): both ends
+    py = faces[:, 1::2] - camera[1]
+
+    def left_of(angle: float) -> np.ndarray:  # > 0: left of the line along ``angle``
+        return math.cos(angle) * py - math.sin(angle) * px
+
+    behind = ((math.cos(theta) * px + math.sin(theta) * py) <= 0).all(axis=1)
+    beyond_left = (left_of(theta + half_view) > 0).all(axis=1)
+    beyond_right = (left_of(theta - half_view) < 0).all(axis=1)
+    return ~(behind | beyond_left | beyond_right)
 
 
 def _cast(faces: np.ndarray, origin, dx: np.ndarray, dy: np.ndarray):

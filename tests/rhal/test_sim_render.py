@@ -266,3 +266,14 @@ def test_what_is_prepared_per_world_is_shared_by_equal_worlds(monkeypatch):
         front(World.from_doc(DRAWING), World.from_doc(DRAWING).start_pose)
     front(World.from_doc({**DRAWING, "boxes": []}), World.from_doc(DRAWING).start_pose)
     assert len(built) == 2
+
+
+def test_a_wall_across_the_whole_view_is_seen_though_its_ends_are_not():
+    # Its ends are 62 degrees left and right of ahead, outside the 62-degree view.
+    across = {"from": [0.0, -1.9], "to": [0.0, 1.9], "thickness": 0.1}
+    pose = (-1.0 - 0.05 - RADIUS, 0.0, 0.0)
+    focal = FRONT_SIZE[0] / 2 / math.tan(FOV / 2)
+    row = round(FRONT_SIZE[1] / 2 + focal * 0.2 / 1.0 - 4)  # just above its foot, 1 m ahead
+    walled, bare = front(world_of(walls=[across]), pose), front(world_of(), pose)
+    for column in (5, 320, 635):
+        assert not near(walled.getpixel((column, row)), bare.getpixel((column, row)), 10)
