@@ -83,7 +83,9 @@ def option_field(option: Option, initial: Any) -> forms.Field:
     help_text = _("%(help)s (default: %(default)s)") % {"help": option.help, "default": default}
     common = {"required": False, "initial": initial, "help_text": help_text.lstrip()}
     if option.kind is bool:
-        return forms.BooleanField(**common)
+        # An option whose default is "not set" (the driver decides) has three states: a
+        # checkbox would store False for "not set".
+        return (forms.NullBooleanField if option.default is None else forms.BooleanField)(**common)
     if option.kind is int:
         return forms.IntegerField(**common)
     if option.kind is float:
