@@ -157,6 +157,8 @@ def pages(user) -> list[str]:
         "/accounts/password/",
         "/languages/",
         "/help/robot-api/",
+        "/worlds/new",
+        "/worlds/builtin/boxes",
     ]
 
 

@@ -15,7 +15,7 @@ from django.urls import reverse
 from django.utils.translation import gettext as _
 
 from worlds.access import OWN, get_world_for_user, worlds_for_user
-from worlds.documents import builtin_worlds
+from worlds.documents import builtin_title, builtin_worlds
 
 BLANK_SIZE = 4.0  # m: a new world's arena, as the built-in ones
 
@@ -63,7 +63,8 @@ def world_edit(request, world_id: int):
 
 @login_required
 def world_builtin(request, name: str):
-    document = builtin_worlds().get(name)
-    if document is None:
+    if name not in builtin_worlds():
         raise Http404(_("No such world."))
-    return editor(request, document, can_edit=False, heading=document.get("title") or name)
+    title = builtin_title(name)  # in the reader's language, and so its copy's
+    document = {**builtin_worlds()[name], "title": title}
+    return editor(request, document, can_edit=False, heading=title)
