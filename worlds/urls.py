@@ -6,7 +6,7 @@ the editor's author.
 
 from django.urls import path
 
-from worlds import views
+from worlds import editor_views, views
 
 urlpatterns = [
     path("", views.world_list, name="world-list"),
@@ -21,4 +21,7 @@ urlpatterns = [
     ),
     path("<int:world_id>/delete", views.world_delete, name="world-delete"),
     # The editor's (worlds.editor_views):
+    path("new", editor_views.world_new, name="world-new"),
+    path("<int:world_id>/edit", editor_views.world_edit, name="world-edit"),
+    path("builtin/<slug:name>", editor_views.world_builtin, name="world-builtin"),
 ]
