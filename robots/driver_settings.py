@@ -26,6 +26,7 @@ from robots.models import RUN_SETTINGS, Robot
 from robots.reset import check_setting as check_start_each_run
 from runbox.isolation import IsolationUnavailable, Policy
 from runbox.launcher import Limits
+from worlds.resolve import options_to_check
 
 
 def known_driver(url: str) -> str:
@@ -49,7 +50,7 @@ def check_settings(url: str, settings: dict) -> None:
         check_speech_settings(settings.get("speech"))
         check_start_each_run(settings)
         Policy.from_settings(robot.run_isolation(django_settings.RUN_ISOLATION))
-        rhal.connect(url, **robot.driver_options())  # builds the driver, opens nothing
+        rhal.connect(url, **options_to_check(robot))  # builds the driver, opens nothing
     except (TypeError, ValueError, AttributeError, rhal.RhalError, IsolationUnavailable) as exc:
         raise ValueError(_("settings: %(why)s") % {"why": exc}) from None
 
@@ -120,7 +121,8 @@ def settings_from(form: forms.BaseForm, robot: Robot, url: str | None = None) ->
         if value is not None and value != baseline:
             chosen[option.name] = value
     try:
-        rhal.connect(url, **chosen)  # builds the driver, opens nothing
+        # Builds the driver, opens nothing; a stored world named by its document.
+        rhal.connect(url, **options_to_check(Robot(url=url, settings=chosen)))
     except (TypeError, ValueError, rhal.RhalError) as exc:
         _add_error(form, exc, chosen)
         return robot.settings

@@ -109,6 +109,29 @@ def driver_options(robot) -> tuple[dict, WorldUnavailable | None]:
         return {**robot.driver_options(), "world": FALLBACK_WORLD}, exc
 
 
+def options_to_check(robot) -> dict:
+    """The driver options an edit of a robot's URL or settings is checked with (by building
+    its driver): a stored world it names, by id or name, in place of its id or name, whoever
+    owns that world; WorldUnavailable if none has that id or name. Whether the robot's owner
+    may use it is the agent's to say, on the robot's page (driver_options)."""
+    options = robot.driver_options()
+    value = world_setting(robot)
+    if value is None:
+        return options
+    if (name := builtin_name(value)) is not None:
+        return {**options, "world": name}
+    if isinstance(value, int) or (isinstance(value, str) and value.isdigit()):
+        found = World.objects.filter(pk=int(value)).first()
+    else:
+        found = World.objects.filter(name=value).first() if isinstance(value, str) else None
+    if found is None:
+        raise WorldUnavailable(
+            _("no world %(world)s (a built-in world's name, or the id or name of a stored world)")
+            % {"world": repr(value)}
+        )
+    return {**options, "world": found.document}
+
+
 # -- telling the robots in a world that it changed ------------------------------------------
 
 

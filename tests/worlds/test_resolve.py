@@ -113,3 +113,25 @@ async def receive(channel: str) -> dict:
 async def nothing_for(channel: str) -> bool:
     layer = get_channel_layer()
     return not layer.channels.get(channel) if hasattr(layer, "channels") else True
+
+
+def test_staff_set_a_stored_world_on_a_robot(people):
+    """A robot's URL or settings naming a stored world pass the edit's check (its driver built
+    with the document); a world no one has is refused there, saying so."""
+    from tests.worlds.conftest import api_of
+
+    staff = people["tina"]
+    staff.is_staff = True
+    staff.save()
+    world = stored(people["alice"])
+    sim("lab-sim", "sim://")
+    call = api_of(staff)
+    by_url = call("PATCH", "/api/robots/lab-sim", {"url": f"sim://?world={world.pk}"})
+    assert by_url.status_code == 200, by_url.content
+    by_name = call("PATCH", "/api/robots/lab-sim", {"settings": {"world": "corridor"}})
+    assert by_name.status_code == 200, by_name.content
+    refused = call("PATCH", "/api/robots/lab-sim", {"settings": {"world": "nowhere"}})
+    assert refused.status_code == 422 and "no world 'nowhere'" in refused.json()["detail"]
+    # Set, but its owner (none: the lab's) may not use alice's private world: said at its open.
+    robot = Robot.objects.get(name="lab-sim")
+    assert "no world" in str(driver_options(robot)[1])
