@@ -419,3 +419,49 @@ def test_a_sim_chosen_watched_or_reset_is_in_use(school):
     from robots import sims
 
     assert sims.reap_idle() == [name]
+
+
+# -- where the agents and the reaper run ---------------------------------------------------------
+
+
+@pytest.mark.django_db(transaction=True)
+async def test_the_personal_sims_agent_process_serves_sims_only_and_reaps(monkeypatch, settings):
+    """`robotide agent --personal-sims` (fleet mode): an AgentManager that starts the personal
+    sims' agents, those made later (not other robots'), stops removed ones, and runs the
+    reaper, which stops the agent of a sim left idle."""
+    from asgiref.sync import sync_to_async
+    from channels.layers import get_channel_layer
+
+    from robots import sims
+    from robots.agent import AgentManager
+    from tests.e2e.agents import until
+
+    await get_channel_layer().flush()
+    monkeypatch.setattr(sims, "REAP_EVERY", 0.05)
+    started, stopped = [], []
+    manager = AgentManager()
+    monkeypatch.setattr(manager, "start_agent", started.append)
+
+    async def stop_agent(name):
+        stopped.append(name)
+
+    monkeypatch.setattr(manager, "stop_agent", stop_agent)
+    user = await sync_to_async(User.objects.create_user)("pat")
+    await sync_to_async(Robot.objects.create)(name="lab-robot", url="sim://")
+    old = (await sync_to_async(make_sim)(user))["name"]
+    await manager.start(personal_only=True)
+    try:
+        assert started == [old]
+        await sync_to_async(Robot.objects.create)(name="another-lab-robot", url="sim://")
+        await sync_to_async(sims.announce)("another-lab-robot")  # not a sim: not started here
+        new = (await sync_to_async(make_sim)(user))["name"]  # robot.added, heard after it
+        await until(lambda: new in started, what="the new sim's agent started")
+        long_ago = timezone.now() - timedelta(hours=2)
+        await sync_to_async(Robot.objects.filter(name=old).update)(used=long_ago)
+        await until(lambda: old in stopped, what="the idle sim's agent stopped by the reaper")
+        # (its own robot.added, sent before the manager listened, is heard too: start_agent
+        # starts an agent once)
+        assert set(started) == {old, new} and stopped == [old]
+        assert not await sync_to_async(Robot.objects.filter(name=old).exists)()
+    finally:
+        await manager.shutdown()
