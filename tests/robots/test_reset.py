@@ -20,6 +20,7 @@ from django.test import Client
 import rhal
 from robots import messages
 from robots.agent import RobotAgent
+from robots.bus import ask_agent
 from robots.models import Robot
 from tests.e2e.agents import finished, log_of, output_of, run_program
 from tests.robots.test_run_queue import api
@@ -167,16 +168,9 @@ async def test_a_real_robot_cannot_be_reset():
         sam, _ = await users()
         status, body = await call(sam, "POST", "/api/robots/pio/reset")
         assert (status, body) == (409, {"detail": "Only simulated robots can be reset."})
-        state = await sync_to_async(_state)("pio")
-        assert state["resettable"] is False
+        assert (await ask_agent("pio", "robot.state"))["resettable"] is False
     finally:
         await agent.shutdown()
-
-
-def _state(name):
-    from robots.bus import ask_agent_sync
-
-    return ask_agent_sync(name, "robot.state")
 
 
 @pytest.mark.django_db(transaction=True)
@@ -215,7 +209,9 @@ async def test_start_each_run_holds_for_every_run_and_a_pose_given_for_the_next_
     each_run = {"settings": {"start_each_run": True}}
     status, body = await call(staff, "PATCH", "/api/robots/sim", each_run)
     assert status == 200 and body["settings"] == {"start_each_run": True}, body
-    await until(lambda: sim_agent.start_each_run)  # the agent reopened the robot with it
+    # The agent has reopened the robot with it once it answers what was sent after.
+    await ask_agent("sim", "robot.state")
+    assert sim_agent.start_each_run
 
     # Two runs in a row: each starts at the start pose, though the first moved the robot.
     assert at(await started_at(sam, robot), start)
@@ -250,8 +246,8 @@ async def test_without_the_setting_a_run_starts_where_the_last_left_it_but_a_pos
     await moved_away(sim_agent, SPOT)
     assert at(await started_at(sam, robot), SPOT)
     # A plain reset forgets a pose given before it.
-    status, body = await call(sam, "POST", "/api/robots/sim/reset", SPOT)
-    status, body = await call(sam, "POST", "/api/robots/sim/reset")
+    assert (await call(sam, "POST", "/api/robots/sim/reset", SPOT))[0] == 200
+    assert (await call(sam, "POST", "/api/robots/sim/reset"))[0] == 200
     await moved_away(sim_agent, start)
     assert not at(await started_at(sam, robot), SPOT)
 
