@@ -192,7 +192,12 @@
           x: zone.x - zone.width / 2, y: -zone.y - zone.height / 2, width: zone.width, height: zone.height,
           class: "we-zone" + (zone.colour ? "" : " unpainted"), fill: zone.colour || null,
         }, g);
-        label(g, zone.name, zone.x, zone.y, Math.min(0.16, zone.height / 2), "we-zone-name");
+        // Its name in a corner, clear of what stands in its middle: a top one, unless the zone
+        // is in the arena's north part, where the landmark it is named after may be.
+        var size = Math.min(0.12, zone.height / 2), inset = 0.03 + size / 2;
+        var north = zone.y > 0 && Math.abs(zone.y) >= Math.abs(zone.x);
+        var y = north ? zone.y - zone.height / 2 + inset : zone.y + zone.height / 2 - inset;
+        label(g, zone.name, zone.x - zone.width / 2 + 0.04, y, size, "we-zone-name");
       },
       lines: function (g, line) {
         var points = line.points.map(function (p) { return p[0] + "," + -p[1]; }).join(" ");
@@ -204,8 +209,11 @@
         var a = [mark.x - along[0] * half, mark.y - along[1] * half], b = [mark.x + along[0] * half, mark.y + along[1] * half];
         el("line", { x1: a[0], y1: -a[1], x2: b[0], y2: -b[1], class: "we-hit" }, g);
         el("line", { x1: a[0], y1: -a[1], x2: b[0], y2: -b[1], class: "we-landmark" }, g);
-        var tx = mark.x + Math.cos(mark.facing) * 0.14, ty = mark.y + Math.sin(mark.facing) * 0.14;
-        label(g, mark.text, tx, ty, 0.12, "we-landmark-text");
+        // Its text as a sign on the wall reads: along the wall, just in front of it, upright.
+        var tx = mark.x + Math.cos(mark.facing) * 0.09, ty = mark.y + Math.sin(mark.facing) * 0.09;
+        var along = Math.round(mark.facing * DEG + 90);
+        along = ((along + 90) % 180 + 180) % 180 - 90;
+        label(g, mark.text, tx, ty, 0.1, "we-landmark-text").setAttribute("transform", "rotate(" + -along + " " + tx + " " + -ty + ")");
       },
       start: function (g, pose, index) {
         var r = robotRadius();
@@ -219,6 +227,7 @@
     function label(g, text, x, y, size, cls) {
       var t = el("text", { x: x, y: -y, "font-size": round(size), class: cls }, g);
       t.textContent = text || "";
+      return t;
     }
 
     function robotRadius() { return (doc.robot && doc.robot.radius) || 0.15; }
