@@ -88,9 +88,12 @@ def wait_drawn_at(page: Page, pose, tolerance=0.01) -> None:
     )
 
 
-@pytest.mark.parametrize("width,height", [(390, 844), (1366, 900)])
-def test_the_robot_page_draws_the_sim_where_the_telemetry_says(appliance, new_page, width, height):
-    page = new_page()
+# A phone's screen has two device pixels to a CSS pixel: the canvas draws at its resolution.
+@pytest.mark.parametrize("width,height,ratio", [(390, 844, 2), (1366, 900, 1)])
+def test_the_robot_page_draws_the_sim_where_the_telemetry_says(
+    appliance, new_page, width, height, ratio
+):
+    page = new_page(device_scale_factor=ratio)
     page.set_viewport_size({"width": width, "height": height})
     sign_in(page)
     urls = watch_requests(page)
@@ -101,6 +104,8 @@ def test_the_robot_page_draws_the_sim_where_the_telemetry_says(appliance, new_pa
     wait_drawn_at(page, before)
     box = canvas.bounding_box()
     assert box["width"] <= width and box["x"] >= 0, "the canvas fits the page"
+    backing = page.evaluate("() => document.querySelector('canvas.simview-canvas').width")
+    assert abs(backing - box["width"] * ratio) <= ratio, "as many pixels as the screen shows"
     assert near(pixel_at(page, *before[:2]), ROBOT_RGB), "the robot is drawn where it is"
 
     program = appliance.create_program(f"Arc {width}", ARC)
@@ -158,3 +163,71 @@ def test_without_scripts_the_page_shows_the_servers_jpeg(appliance, new_page):
     page.wait_for_function("() => document.getElementById('camera').naturalWidth === 320")
     assert any("camera.mjpg" in u for u in urls)
     save_shot(page, "sim-view-no-scripts-390")
+
+
+# A world with one of each thing simview.js draws; its robot has a sonar ring and a cone.
+WORLD = {
+    "world": {
+        "format": 1, "name": "every-thing", "title": "Every thing",
+        "size": {"width": 4.0, "height": 3.0},
+        "walls": [{"from": [-1.0, -1.5], "to": [-1.0, 0.0], "thickness": 0.1}],
+        "boxes": [{"x": 1.0, "y": 0.8, "width": 0.6, "height": 0.3, "angle": 0.5}],
+        "landmarks": [{"text": "kitchen", "x": 2.0, "y": -1.0, "facing": math.pi,
+                       "size": 0.4, "height": 0.3}],
+        "lines": [{"points": [[-1.8, 1.2], [0.0, 1.2], [0.5, 0.5]], "width": 0.05,
+                   "colour": "#000000"}],
+        "zones": [{"name": "kitchen", "x": 1.4, "y": -1.0, "width": 1.0, "height": 0.6,
+                   "colour": "#40a0ff"}],
+        "start": [{"x": 0.0, "y": 0.0, "theta": math.pi / 2}],
+    },
+    "robot": {"radius": 0.15, "range": {"cone_deg": 15, "rays": 5, "min": 0.03, "max": 4.0},
+              "sonar": [90, 45, 0, -45, -90], "floor_sensor": True},
+    "speed": 2,
+}  # fmt: skip
+HARNESS = """\
+<link rel="stylesheet" href="/static/robotide/app.css">
+<div id="socket" class="card"><figure class="simview">
+<canvas class="simview-canvas" data-world-url="/robots/sim/world.json" width="320" height="240">
+</canvas></figure></div>
+<script src="/static/robotide/simview.js"></script>
+"""
+SEND = """(pose) => document.getElementById("socket").dispatchEvent(new CustomEvent(
+    "htmx:wsBeforeMessage", {bubbles: true, cancelable: true,
+    detail: {message: JSON.stringify({type: "robot.pose", pose: pose})}}))"""
+
+
+def pose(x, y, theta, linear=0.0, angular=0.0, bumper=False, rng=1.0, t=1.0) -> dict:
+    return {"x": x, "y": y, "theta": theta, "linear": linear, "angular": angular,
+            "bumper": bumper, "range": rng, "sonar": [0.5, 0.8, 1.0, 0.8, 0.5], "t": t}  # fmt: skip
+
+
+def test_every_thing_of_a_world_is_drawn_and_the_pose_extrapolated(new_page):
+    """The page's drawing on its own (its world and its poses given), for worlds with walls,
+    turned boxes, zones, lines and a sonar ring; between poses the robot goes on along its
+    speeds (at the sim's speed, 2x here), for a moment only."""
+    page = new_page()
+    sign_in(page)
+    page.route("**/robots/sim/world.json", lambda route: route.fulfill(json=WORLD))
+    page.set_viewport_size({"width": 1366, "height": 900})
+    page.set_content(HARNESS)
+    page.wait_for_function("() => document.querySelector('canvas.simview-canvas').dataset.view")
+    page.evaluate(SEND, pose(-0.3, -0.6, 0.0, bumper=True))
+    wait_drawn_at(page, (-0.3, -0.6, 0.0))
+    assert near(pixel_at(page, -0.3, -0.6), ROBOT_RGB)
+    assert near(pixel_at(page, -0.3, -0.6 + 0.14), (214, 32, 32), 40), "the bumper, red"
+    assert near(pixel_at(page, 1.0, 0.8), (160, 118, 74)), "the box"
+    assert near(pixel_at(page, -1.0, -1.0), (90, 74, 58)), "the wall"
+    assert near(pixel_at(page, 0.0, 1.2), (0, 0, 0), 40), "the painted line"
+    zone = pixel_at(page, 1.0, -1.2)
+    assert zone[2] > zone[0] + 40, f"the zone's blue: {zone}"
+    assert not near(pixel_at(page, 1.3, 0.5), (160, 118, 74)), "the box is turned"
+    save_shot(page, "sim-view-every-thing-1366")
+
+    page.evaluate(SEND, pose(-0.3, -0.6, 0.0, linear=0.1, t=2.0))
+    page.wait_for_function(
+        "() => Number(document.querySelector('canvas.simview-canvas').dataset.pose"
+        ".split(' ')[0]) > -0.29"
+    )  # it goes on east at 0.1 m/s x 2
+    page.wait_for_timeout(600)  # past the hold (0.3 s): it stops where the speeds took it
+    x, y, theta = drawn(page)
+    assert x == pytest.approx(-0.3 + 0.1 * 2 * 0.3, abs=0.002) and y == pytest.approx(-0.6)

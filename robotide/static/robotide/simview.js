@@ -278,6 +278,8 @@
     ctx.strokeStyle = COLOURS.wall;
     ctx.lineWidth = 4;
     ctx.strokeRect(X(-hw) - 2, Y(hh) - 2, w.size.width * s + 4, w.size.height * s + 4);
+    // A zone named after its landmark (the built-in worlds' are) says the name once.
+    var zoneNames = new Set((w.zones || []).map(function (zone) { return zone.name; }));
     (w.landmarks || []).forEach(function (mark) {
       var size = Math.max(6, (mark.size || 0.4) * s);
       ctx.save();
@@ -287,6 +289,7 @@
       ctx.fillStyle = "#111111";
       ctx.fillRect(-2, -size / 2, 4, size);
       ctx.restore();
+      if (zoneNames.has(mark.text)) return;
       ctx.fillStyle = COLOURS.text;
       ctx.font = "bold " + font + "px system-ui, sans-serif";
       // Clear of its wall whichever way it faces: half the label's extent that way, and a gap.
