@@ -1,7 +1,8 @@
 """End to end on a running appliance (issue 30): a world posted to /api/worlds, a personal sim
 made in it (POST /api/sims {"world": id}), the sim's agent runs it in that document (what the
-robot page draws from, /robots/<name>/world.json); a save reaches the sim; a student who may
-not see the world cannot put a sim in it."""
+robot page draws from, /robots/<name>/world.json); a save reaches the sim; once the world is
+deleted the sim does not open and its page says why; a student who may not see the world cannot
+put a sim in it."""
 
 from tests.appliance import wait_for
 from tests.worlds.documents import corridor
@@ -29,6 +30,17 @@ def test_a_sim_in_a_stored_world(appliance):
     saved = appliance.api("PUT", f"/api/worlds/{world['id']}", moved, token=token).json()
     assert saved["revision"] == 2
     wait_for(lambda: world_of(appliance, session, robot) == saved["document"], what="the save")
+
+    # Gone: the sim no longer opens, and its page says why.
+    assert appliance.api("DELETE", f"/api/worlds/{world['id']}", token=token).status_code == 204
+
+    def why_not_open():
+        sensors = appliance.api("GET", f"/api/robots/{robot}/sensors", token=token)
+        return sensors.status_code == 503 and "no world" in sensors.json()["detail"]
+
+    wait_for(why_not_open, what="the sim saying its world is gone")
+    page = session.get(f"/robots/{robot}/")
+    assert page.status_code == 200 and "no world" in page.text, page.text[-2000:]
 
     other = appliance.new_user("wendell", PASSWORD)
     refused = appliance.api("POST", "/api/sims", {"world": world["id"]}, token=other)
