@@ -46,7 +46,7 @@ from robots.robot_api import RobotApi
 from robots.run_queue import RunQueue
 from robots.sim_view import PoseStream, sim_info
 from robots.start_pose import StartPose
-from runbox import SYSTEM_PATH, cgroups, launcher, seccomp
+from runbox import SYSTEM_PATH, cgroups, launcher, seccomp, timescale
 from runbox.ahead import Ahead, discard
 from runbox.box import Launch, Listener, make_box
 from runbox.isolation import InForce, IsolationUnavailable, Policy, run_uid
@@ -592,6 +592,8 @@ class RobotAgent:
             filename, source = await asyncio.to_thread(language.program_file, filename, source)
         program = self.isolation.home() / filename
         argv = [*language.command(str(program)), *map(str, message.get("args", ()))]
+        # A sim faster than real time: the program's clock too (runbox.timescale).
+        argv = timescale.command(argv, timescale.speed_of(self.driver.capabilities()))
         launch = Launch(
             filename, source.encode(),
             self.isolation.program_command(argv, uid), env,

@@ -3,9 +3,10 @@
 # --quiet (second) leaves out what an ordinary user is told (said once, when robotide starts).
 # As root: what is missing is installed from Debian's archive: the venv module (python3-venv:
 # a fresh Debian's python3 has none), bubblewrap (the runs' box), slirp4netns and iproute2 (the
-# NAT of network 'full'). As an ordinary user runs are boxed with what every Debian machine has
-# (util-linux's unshare and python3); this says what would give them more, and goes on, unless
-# the virtualenv itself cannot be made.
+# NAT of network 'full'), libfaketime (a sim's runs faster than real time: runbox/timescale.py).
+# As an ordinary user runs are boxed with what every Debian machine has (util-linux's unshare
+# and python3); this says what would give them more, and goes on, unless the virtualenv itself
+# cannot be made (without libfaketime a sim whose speed is above 1 refuses its runs, saying so).
 set -eu
 python="${1:-python3}"
 quiet="${2:-}"
@@ -22,6 +23,7 @@ have prlimit || need="$need util-linux"
 have bwrap || need="$need bubblewrap"
 have slirp4netns || need="$need slirp4netns"
 have ip || need="$need iproute2"
+ls /usr/lib/*/faketime/libfaketime.so.1 >/dev/null 2>&1 || need="$need libfaketime"
 if [ "$(id -u)" -eq 0 ] && [ -n "$need" ]; then
     export DEBIAN_FRONTEND=noninteractive
     apt-get update -qq

@@ -2,10 +2,10 @@
 
     python3 boxrun.py '{"source": "...", "network": "loopback", "limits": {...}}'
 
-More: "args" (the program's), "ahead" (seconds the box waits, made, before its run is
-given), "refuse" (the gate's answer), "stop_after", "grace"; "stop_on" (stopped as its user
-would, once it printed a line holding this text and, with "stop_on_peak_mb", once the watch
-has sampled at least that much memory).
+More: "args" (the program's), "speed" (its clock's, as a sim's: runbox.timescale), "ahead"
+(seconds the box waits, made, before its run is given), "refuse" (the gate's answer),
+"stop_after", "grace"; "stop_on" (stopped as its user would, once it printed a line holding
+this text and, with "stop_on_peak_mb", once the watch has sampled at least that much memory).
 
 Standard library and runbox only, so that an ordinary user's python3 runs it too (the
 rootless box); the Robot API is stood in for by a TCP echo on the run's 127.0.0.1:7010.
@@ -22,7 +22,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from runbox import SYSTEM_PATH, launcher, seccomp  # noqa: E402
+from runbox import SYSTEM_PATH, launcher, seccomp, timescale  # noqa: E402
 from runbox.box import Launch, Listener, make_box  # noqa: E402
 from runbox.cgroups import CgroupSupport, detect  # noqa: E402
 from runbox.isolation import Policy  # noqa: E402
@@ -62,8 +62,9 @@ async def run(spec: dict) -> dict:
         in_force, socket_dir=sockets, disk_mb=limits.disk_mb, listeners=listeners,
         seccomp_fd=seccomp.open_filter_fd(), rlimits=limits.rlimits(),
     )  # fmt: skip
+    program = ["/usr/bin/python3", str(in_force.home() / "main.py"), *spec.get("args", ())]
     argv = in_force.program_command(
-        ["/usr/bin/python3", str(in_force.home() / "main.py"), *spec.get("args", ())],
+        timescale.command(program, spec.get("speed", 1)),  # a sim's speed: its clock
         in_force.uid(int(time.time()) % 100_000, str(folder)),
     )
     env = launcher.environment(PYTHON, in_force.home(), {})
