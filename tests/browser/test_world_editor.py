@@ -130,6 +130,23 @@ def test_a_wall_drawn_outside_the_arena_is_refused_beside_it(page, appliance, sc
     save(page)
 
 
+def test_a_start_pose_a_box_covers_and_a_line_off_the_floor_are_refused(page, appliance):
+    """Refusals naming an item without a field of the form: said at the top of its form."""
+    new_world(page, "Covered")
+    button(page, "Box").click()
+    drag(page, (-0.2, -0.2), (0.2, 0.2))  # over the start pose at the centre
+    button(page, "Save").click()
+    expect(page.locator("#we-form-title")).to_have_text("Start pose 1 (where the robot starts)")
+    expect(page.locator("#we-form > .we-error")).to_contain_text("overlaps box 1")
+    page.locator("#we-canvas").focus()
+    page.keyboard.press("Control+z")
+    button(page, "Line").click()
+    drag(page, (1.0, 1.5), (2.4, 1.5))
+    button(page, "Save").click()
+    expect(page.locator("#we-form-title")).to_have_text("Line 1")
+    expect(page.locator("#we-form > .we-error")).to_contain_text("outside the arena")
+
+
 def test_undo_removes_the_last_drawn_item_and_redo_brings_it_back(page, appliance):
     page.goto("/worlds/new")
     button(page, "Box").click()

@@ -377,7 +377,7 @@
       function by(p) { return [round(p[0] + dx), round(p[1] + dy)]; }
       if (kind === "walls") { it.from = by(it.from); it.to = by(it.to); }
       else if (kind === "lines") it.points = it.points.map(by);
-      else if (kind === "landmarks") it = onWall(raw, it);
+      else if (kind === "landmarks") it = onWall(raw || [it.x + dx, it.y + dy], it);  // slides along walls
       else { it.x = round(it.x + dx); it.y = round(it.y + dy); }
       list(kind)[selected.index] = it;
     }
@@ -499,17 +499,13 @@
         if (arrow && selected && canEdit) { event.preventDefault(); nudge(arrow); return; }
         if (event.key === "Enter" && event.target === svg && tool !== "select" && canEdit) { event.preventDefault(); addAtCentre(); return; }
       }
-      if (SHORTCUTS[key] && !event.target.closest("button, a")) useTool(SHORTCUTS[key]);
+      if (SHORTCUTS[key]) useTool(SHORTCUTS[key]);
     });
 
     // The keyboard's way to move: one grid step (a centimetre without the grid).
     function nudge(direction) {
       var by = snapping() ? step() : 0.01;
       moveTo(JSON.parse(JSON.stringify(item(selected))), direction[0] * by, direction[1] * by, null);
-      if (selected.kind === "landmarks") {
-        var it = item(selected);
-        list("landmarks")[selected.index] = onWall([it.x + direction[0] * by, it.y + direction[1] * by], it);
-      }
       commit();
       fillForm();
     }
@@ -575,9 +571,10 @@
       heading.id = "we-form-title";
       heading.textContent = TITLES[kind](selected && selected.index);
       form.appendChild(heading);
-      if (error && (error.kind === null ? !selected : selected && error.kind === selected.kind && error.index === selected.index) && !error.field) {
-        form.appendChild(errorNote(error.message));
-      }
+      // The message by its field, or at the top when no field of the form is the one it names
+      // (a line's points, the robot's settings).
+      var byField = error && fields().some(function (f) { return f[0] === error.field; });
+      if (selectedIsError() && !byField) form.appendChild(errorNote(error.message));
       fields().forEach(function (field) { form.appendChild(fieldRow(field)); });
       if (selected && selected.kind === "start" && selected.index > 0 && canEdit) {
         form.appendChild(button(gettext("Make it the start pose"), function () {
@@ -761,8 +758,7 @@
       if (response.status === 409) refusal = { kind: null, index: null, field: "name", message: refusal.message };
       error = refusal;
       say(refusal.message, "error");
-      if (refusal.kind) selected = { kind: refusal.kind, index: refusal.index };
-      else if (refusal.kind === null && refusal.field) selected = null;
+      selected = refusal.kind ? { kind: refusal.kind, index: refusal.index } : null;  // the world's form
       render();
       buildForm();
       // The field to mend, if the message names one; else the message, in view.
