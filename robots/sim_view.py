@@ -12,12 +12,8 @@ in, its robot's shape and sensors, and its time scale (GET /robots/<name>/world.
 """
 
 import asyncio
-import logging
-import math
 
 import rhal
-
-log = logging.getLogger(__name__)
 
 POSE_RATE = 20.0  # Hz, at most, while the robot moves
 DIGITS = 4  # 0.1 mm, 0.1 mrad: plenty for a picture, short on the wire
@@ -32,8 +28,7 @@ def sim_info(driver) -> dict | None:
     if not is_sim(driver):
         return None
     sim = driver.capabilities().get("sim") or {}
-    world = sim.get("world") or getattr(driver, "arena_name", "") or ""
-    return {"world": world, "speed": sim.get("speed", getattr(driver, "speed", 1)) or 1}
+    return {"world": sim.get("world", ""), "speed": sim.get("speed", 1)}
 
 
 def pose_of(readings: dict) -> tuple | None:
@@ -139,63 +134,10 @@ class PoseStream:
         if not is_sim(driver):
             await self.agent.reply(message, {"error": f"robot {self.agent.name} is no sim"})
             return
-        answer = {"world": world_doc(driver), "robot": robot_doc(driver)}
+        answer = {"world": driver.world_doc(), "robot": driver.robot_doc()}
         answer["speed"] = sim_info(driver)["speed"]
         # Where it is now: a page draws it at once, still or not, then follows robot.pose.
         pose = await self._read()
         if pose is not None:
             answer["pose"] = pose_fields(pose)
         await self.agent.reply(message, answer)
-
-
-def world_doc(driver) -> dict:
-    """The sim's world document (rhal.sim's world_doc(); for a sim of before it, its arena
-    written as one)."""
-    if hasattr(driver, "world_doc"):
-        return driver.world_doc()
-    arena = driver._arena
-    return {
-        "format": 1,
-        "name": driver.arena_name,
-        "title": driver.arena_name,
-        "size": {"width": 2 * arena.half_width, "height": 2 * arena.half_height},
-        "walls": [],
-        "boxes": [
-            {
-                "x": (b.west + b.east) / 2,
-                "y": (b.south + b.north) / 2,
-                "width": b.east - b.west,
-                "height": b.north - b.south,
-                "angle": 0.0,
-            }
-            for b in arena.boxes
-        ],  # fmt: skip
-        "landmarks": [
-            {
-                "text": m.text,
-                "x": m.x,
-                "y": m.y,
-                "facing": m.facing,
-                "size": m.size,
-                "height": m.height,
-            }
-            for m in arena.landmarks
-        ],  # fmt: skip
-        "lines": [],
-        "zones": [],
-        "start": [{"x": 0.0, "y": 0.0, "theta": math.pi / 2}],
-    }
-
-
-def robot_doc(driver) -> dict:
-    """The sim robot's shape and sensors, as the browser draws them."""
-    if hasattr(driver, "robot_doc"):
-        return driver.robot_doc()
-    from rhal.sim import MAX_RANGE, ROBOT_RADIUS
-
-    return {
-        "radius": ROBOT_RADIUS,
-        "range": {"cone_deg": 0, "rays": 1, "min": 0.0, "max": MAX_RANGE},
-        "sonar": [],
-        "floor_sensor": False,
-    }

@@ -4,6 +4,7 @@ page asks its world once (GET /robots/<name>/world.json, robot.world)."""
 
 import asyncio
 import json
+import math
 import time
 
 import pytest
@@ -147,3 +148,22 @@ def test_a_page_draws_a_sim_and_shows_a_real_robots_camera(monkeypatch):
     page = client.get("/robots/sim/").content.decode()
     assert "simview-canvas" not in page
     assert '<img class="camera" id="camera" src="/robots/sim/camera.mjpg"' in page
+
+
+async def test_pressing_on_a_wall_is_sent_as_standing_still(sim_agent):
+    """Driven into a wall head-on, the sim stays where it is while its command goes on: the
+    page is told it stands (speeds 0, bumper pressed) and then nothing more, rather than a
+    speed it would draw the robot going into the wall with."""
+    alice = await database_sync_to_async(User.objects.create_user)("alice")
+    comm = communicator(RobotConsumer, "/ws/robots/sim/", alice, name="sim")
+    assert (await comm.connect())[0]
+    await sim_agent.driver.reset((0.0, 1.7, math.pi / 2))  # 0.15 m from the north wall
+    holder = Holder("teleop", "test-driver", "alice")
+    await sim_agent.drive_for(holder, 0.3, 0.0)
+    pressed = await first_pose(comm, lambda pose: pose["bumper"])
+    if pressed["linear"] != 0.0:  # the last moving pose touched; standing comes next
+        pressed = await first_pose(comm, lambda pose: pose["linear"] == 0.0)
+    assert pressed["bumper"] and pressed["angular"] == 0.0
+    assert await frames(comm, 1.0) == [], "nothing more while it presses on the wall"
+    await sim_agent.stop_motion_of(holder.key)
+    await comm.disconnect()
