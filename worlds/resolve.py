@@ -80,10 +80,11 @@ def find_world(value, user) -> str | World:
     else:
         found = None
     if found is None:
-        raise WorldUnavailable(
-            _("no world %(world)s that this robot's owner may use (a built-in world's name, or"
-              " the id or name of a stored world they may see)") % {"world": repr(value)}
-        )  # fmt: skip
+        why = _(
+            "no world %(world)s that this robot's owner may use: name a built-in world, or a"
+            " stored world of theirs or shared with them (its id or name)"
+        )
+        raise WorldUnavailable(why % {"world": repr(value)})
     return found
 
 
