@@ -33,8 +33,8 @@ def no_robot_reason(user, visible=None) -> str:
             )
         if sim:
             return _(
-                "There are no robots yet. Run on a simulated robot of your own (My sim on the"
-                " workbench; POST /api/sims), or ask your teacher to add a robot."
+                "There are no robots yet. Ask your teacher to add one, or run on a simulated"
+                " robot of your own (My sim on the workbench; POST /api/sims)."
             )
         return _("There are no robots yet. Ask your teacher to add one.")
     if user.is_staff:
