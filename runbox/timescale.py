@@ -57,9 +57,8 @@ def environment(speed: float) -> dict[str, str]:
     path = library()
     if path is None:
         raise TimescaleUnavailable(
-            f"this sim runs at {speed:g}x real time, and its programs' clocks are sped up to"
-            " match by libfaketime, which is not installed on this computer (as root: apt-get"
-            " install libfaketime); or set the robot's speed to 1"
+            f"this sim runs at {speed:g}x real time, and its programs' clocks need libfaketime"
+            " to keep up (as root: apt-get install libfaketime); or set its speed to 1"
         )
     return {"LD_PRELOAD": path, "FAKETIME": f"+0 x{speed:g}"}
 

@@ -134,6 +134,14 @@ PATTERNS = [
         r"its turn on the shared robot ended \((?P<seconds>[\d.]+) s\)",
         gettext_noop("its turn on the shared robot ended (%(seconds)s s)"),
     ),
+    (  # runbox.timescale
+        r"this sim runs at (?P<speed>[\d.]+)x real time, and its programs' clocks need "
+        r"libfaketime to keep up \(as root: apt-get install libfaketime\); or set its speed to 1",
+        gettext_noop(
+            "this sim runs at %(speed)sx real time, and its programs' clocks need libfaketime"
+            " to keep up (as root: apt-get install libfaketime); or set its speed to 1"
+        ),
+    ),
 ]
 _COMPILED = [(re.compile(pattern), words) for pattern, words in PATTERNS]
 _NESTED = ("reason", "why")
