@@ -147,6 +147,21 @@ def test_a_start_pose_a_box_covers_and_a_line_off_the_floor_are_refused(page, ap
     expect(page.locator("#we-form > .we-error")).to_contain_text("outside the arena")
 
 
+def test_the_worlds_robot_is_set_in_the_worlds_form(page, appliance):
+    """A line-following world wants its robot's floor sensor: the world's form sets it (and
+    a sonar ring), saved in the document's robot."""
+    new_world(page, "Track")
+    page.get_by_label("Floor sensor (colour and lines, 0.1 m ahead)").check()
+    page.get_by_label("Sonar ring", exact=False).fill("90, 0, -90")
+    page.get_by_label("Sonar ring", exact=False).press("Tab")
+    page.get_by_label("Radius (m)").fill("0.2")
+    page.get_by_label("Radius (m)").press("Tab")
+    world_id = save(page)
+    robot = appliance.api("GET", f"/api/worlds/{world_id}").json()["document"]["robot"]
+    assert robot["floor_sensor"] is True and robot["sonar"] == [90, 0, -90], robot
+    assert robot["radius"] == 0.2, robot
+
+
 def test_undo_removes_the_last_drawn_item_and_redo_brings_it_back(page, appliance):
     page.goto("/worlds/new")
     button(page, "Box").click()

@@ -534,7 +534,14 @@
     // the document keeps in radians, "pair" an [x, y] point.
     var FIELDS = {
       world: [["title", gettext("Title"), "text"], ["name", gettext("Name (letters, digits and -)"), "text"],
-        ["size.width", gettext("Arena width (m)"), "m"], ["size.height", gettext("Arena height (m)"), "m"]],
+        ["size.width", gettext("Arena width (m)"), "m"], ["size.height", gettext("Arena height (m)"), "m"],
+        // The world's robot (rhal.simulator's RobotSpec): a field left empty is its default.
+        ["-", gettext("The world's robot")],
+        ["robot.radius", gettext("Radius (m)"), "m", 0.15],
+        ["robot.floor_sensor", gettext("Floor sensor (colour and lines, 0.1 m ahead)"), "bool"],
+        ["robot.sonar", gettext("Sonar ring: angles from ahead (°, counter-clockwise; empty: none)"), "list"],
+        ["robot.range.cone_deg", gettext("Range sensor's cone (°)"), "n", 15],
+        ["robot.range.max", gettext("Range sensor's reach (m)"), "m", 4]],
       walls: [["from", gettext("From x, y (m)"), "pair"], ["to", gettext("To x, y (m)"), "pair"], ["thickness", gettext("Thickness (m)"), "m"]],
       boxes: [["x", gettext("Centre x (m)"), "m"], ["y", gettext("Centre y (m)"), "m"], ["width", gettext("Width (m)"), "m"],
         ["height", gettext("Depth (m)"), "m"], ["angle", gettext("Angle (°)"), "deg"]],
@@ -559,9 +566,15 @@
     function fields() { return FIELDS[selected ? selected.kind : "world"]; }
 
     function getPath(obj, key) { return key.split(".").reduce(function (o, k) { return o == null ? o : o[k]; }, obj); }
+    // Sets obj's nested key (making the objects on its way); undefined removes it.
     function setPath(obj, key, value) {
       var keys = key.split("."), last = keys.pop();
-      keys.reduce(function (o, k) { return o[k]; }, obj)[last] = value;
+      var parent = keys.reduce(function (o, k) {
+        if (!o[k] || typeof o[k] !== "object") o[k] = {};
+        return o[k];
+      }, obj);
+      if (value === undefined) delete parent[last];
+      else parent[last] = value;
     }
 
     function buildForm() {
@@ -575,7 +588,7 @@
       // (a line's points, the robot's settings).
       var byField = error && fields().some(function (f) { return f[0] === error.field; });
       if (selectedIsError() && !byField) form.appendChild(errorNote(error.message));
-      fields().forEach(function (field) { form.appendChild(fieldRow(field)); });
+      fields().forEach(function (field) { form.appendChild(field[0] === "-" ? subheading(field[1]) : fieldRow(field)); });
       if (selected && selected.kind === "start" && selected.index > 0 && canEdit) {
         form.appendChild(button(gettext("Make it the start pose"), function () {
           doc.start.unshift(doc.start.splice(selected.index, 1)[0]);
@@ -605,6 +618,12 @@
       return b;
     }
 
+    function subheading(text) {
+      var h = document.createElement("h3");
+      h.textContent = text;
+      return h;
+    }
+
     function errorNote(message) {
       var p = document.createElement("p");
       p.className = "we-error";
@@ -624,8 +643,10 @@
       lab.textContent = field[1];
       row.appendChild(lab);
       var inputs = type === "pair" ? [input(id + "-x", "number"), input(id + "-y", "number")]
-        : [input(id, type === "text" ? "text" : type.indexOf("colour") === 0 ? "color" : "number")];
+        : [input(id, { text: "text", list: "text", bool: "checkbox", colour: "color", "colour?": "color" }[type] || "number")];
+      if (field[3] !== undefined) inputs[0].placeholder = field[3];  // the default, when empty
       lab.htmlFor = inputs[0].id;
+      if (type === "bool") row.classList.add("we-check");
       if (type === "pair") {
         inputs[0].setAttribute("aria-label", field[1] + " x");
         inputs[1].setAttribute("aria-label", field[1] + " y");
@@ -679,7 +700,9 @@
         else if (type === "deg") i.value = Math.round((value || 0) * DEG * 10) / 10;
         else if (type === "none") i.checked = !value;
         else if (type.indexOf("colour") === 0) i.value = value || ZONE_COLOUR;
-        else if (type === "m") i.value = value === undefined ? "" : round(value);
+        else if (type === "m" || type === "n") i.value = value === undefined ? "" : round(value);
+        else if (type === "bool") i.checked = !!value;
+        else if (type === "list") i.value = (value || []).join(", ");
         else i.value = value === undefined || value === null ? "" : value;
       });
     }
@@ -689,6 +712,13 @@
       if (type === "text" || type === "colour") { setPath(it, key, i.value); return; }
       if (type === "colour?") { setPath(it, key, i.value); form.querySelector("input[data-type=none]").checked = false; return; }
       if (type === "none") { setPath(it, key, i.checked ? null : form.querySelector("input[data-type='colour?']").value); return; }
+      if (type === "bool") { setPath(it, key, i.checked); return; }
+      if (type === "list") {
+        var numbers = i.value.split(/[\s,;]+/).filter(Boolean).map(Number);
+        if (numbers.every(isFinite)) setPath(it, key, numbers);
+        return;
+      }
+      if (i.value === "" && i.placeholder) { setPath(it, key, undefined); return; }  // back to the default
       if (i.value === "" || !isFinite(Number(i.value))) return;
       var n = Number(i.value);
       if (type === "pair") getPath(it, key)[i.id.slice(-1) === "x" ? 0 : 1] = n;
@@ -782,8 +812,10 @@
       }
       var match = /^(walls|boxes|landmarks|lines|zones|start)\[(\d+)\](?:\.(\w+))?/.exec(path);
       if (match && doc[match[1]][Number(match[2])]) return { kind: match[1], index: Number(match[2]), field: match[3] || null, message: message };
-      var top = /^(title|name|size(?:\.width|\.height)?)/.exec(path);
-      return { kind: null, index: null, field: top ? (top[1] === "size" ? "size.width" : top[1]) : null, message: message };
+      var key = path.replace(/\[\d+\].*$/, "");  // "robot.sonar[2]": the sonar's field
+      if (key === "size") key = "size.width";
+      var known = FIELDS.world.some(function (f) { return f[0] === key; });
+      return { kind: null, index: null, field: known ? key : null, message: message };
     }
 
     function locPath(loc) {
