@@ -7,6 +7,7 @@ with them as ``"builtin:NAME"``, read-only. Importing a world is posting its exp
 from datetime import datetime
 
 from django.db import IntegrityError, transaction
+from django.db.models import OuterRef, Subquery
 from django.http import Http404
 from django.utils.translation import gettext as _
 from ninja import Field, Router, Schema
@@ -20,7 +21,7 @@ from robotide.schemas import Body
 from worlds import documents
 from worlds.access import OWN, get_world_for_user, worlds_for_user
 from worlds.documents import DocumentError
-from worlds.models import World
+from worlds.models import World, WorldRevision
 from worlds.resolve import BUILTIN_PREFIX, reconfigure, robots_using, tell_robots
 from worlds.shares import ShareError, add_share, remove_share
 
@@ -136,15 +137,20 @@ def visibility(world: World) -> str:
     return "shared" if shares else "private"
 
 
-def stored_out(world: World, revision=None) -> dict:
-    latest = revision or world.revisions.first()
+def summary_out(world: World, revision: int | None) -> dict:
     return {
         "id": world.pk, "name": world.name, "title": world.title,
-        "owner": world.owner.username, "visibility": visibility(world),
-        "revision": latest.number if latest else None,
+        "owner": world.owner.username, "visibility": visibility(world), "revision": revision,
         "created": world.created, "updated": world.updated,
-        "document": revision.document if revision else world.document,
     }  # fmt: skip
+
+
+def stored_out(world: World, revision: WorldRevision | None = None) -> dict:
+    """The world with its document: as saved last, or as ``revision`` kept it."""
+    if revision is None:
+        latest = world.revisions.values_list("number", flat=True).first()
+        return {**summary_out(world, latest), "document": world.document}
+    return {**summary_out(world, revision.number), "document": revision.document}
 
 
 def builtin_out(name: str, document: dict) -> dict:
@@ -186,13 +192,19 @@ def _read_only():
 def list_worlds(request, builtin: bool = True):
     """The worlds you may see: yours first, then those shared with you or your classes (and
     your classes' worlds, for a teacher), then the built-in ones (unless ``builtin=false``)."""
-    visible = worlds_for_user(request.user).prefetch_related("shares", "revisions")
+    latest = WorldRevision.objects.filter(world=OuterRef("pk")).order_by("-number")
+    visible = (
+        worlds_for_user(request.user)
+        .defer("document")  # up to 256 KB each: a list has no documents
+        .annotate(latest=Subquery(latest.values("number")[:1]))
+        .prefetch_related("shares")
+    )
     mine = [w for w in visible if w.owner_id == request.user.pk]
     others = sorted(
         (w for w in visible if w.owner_id != request.user.pk),
         key=lambda w: (w.owner.username, w.name),
     )
-    listed = [stored_out(w, None) for w in mine + others]
+    listed = [summary_out(w, w.latest) for w in mine + others]
     if builtin:
         listed += [builtin_out(n, d) for n, d in documents.builtin_worlds().items()]
     return listed

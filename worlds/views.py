@@ -23,12 +23,18 @@ from worlds.shares import ShareError, add_share, remove_share
 
 @login_required
 def world_list(request: HttpRequest) -> HttpResponse:
-    visible = worlds_for_user(request.user).prefetch_related("shares__group", "shares__user")
+    visible = (
+        worlds_for_user(request.user)
+        .defer("document")  # up to 256 KB each: the list shows none
+        .prefetch_related("shares")
+        .order_by("owner__username", "name")
+    )
+    groups = set(request.user.groups.values_list("pk", flat=True))
     mine, shared, public = [], [], []
-    for world in visible.order_by("owner__username", "name"):
+    for world in visible:
         if world.owner_id == request.user.pk:
             mine.append(world)
-        elif any(s.everyone for s in world.shares.all()) and not _shared_with(world, request.user):
+        elif everyones(world) and not shared_with(world, request.user, groups):
             public.append(world)
         else:  # with them, their classes, or (a teacher) their classes' worlds
             shared.append(world)
@@ -43,8 +49,12 @@ def world_list(request: HttpRequest) -> HttpResponse:
     return render(request, "worlds/list.html", context)
 
 
-def _shared_with(world: World, user) -> bool:
-    groups = set(user.groups.values_list("pk", flat=True))
+def everyones(world: World) -> bool:
+    return any(s.everyone for s in world.shares.all())
+
+
+def shared_with(world: World, user, groups: set[int]) -> bool:
+    """Shared with ``user`` or a class of theirs (``groups``), not only with everyone."""
     return any(s.user_id == user.pk or s.group_id in groups for s in world.shares.all())
 
 

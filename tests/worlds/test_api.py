@@ -176,3 +176,14 @@ def test_openapi_documents_the_routes(client):
     document = spec["components"]["schemas"]["WorldDocument"]
     assert {"size", "walls", "start"} <= set(document["properties"])
     assert "256 KB" in document["description"]
+
+
+def test_list_reads_no_documents_and_a_few_queries(api, people, django_assert_max_num_queries):
+    alice = api["alice"]
+    for n in range(8):
+        world = alice("POST", "/api/worlds", corridor(name=f"w{n}")).json()
+        alice("PUT", f"/api/worlds/{world['id']}", corridor(name=f"w{n}", title="again"))
+    with django_assert_max_num_queries(8) as queries:
+        listed = alice("GET", "/api/worlds?builtin=false").json()
+    assert [w["revision"] for w in listed] == [2] * 8 and "document" not in listed[0]
+    assert not any('"document"' in q["sql"] for q in queries), queries.captured_queries
