@@ -77,9 +77,9 @@ class BridgeInline(admin.TabularInline):
 class RobotAdmin(admin.ModelAdmin):
     form = RobotAdminForm
     list_display = ["name", "url", "description_shown", "owner", "isolation", "last_seen"]
-    readonly_fields = ["isolation", "last_seen"]
+    readonly_fields = ["isolation", "last_seen", "personal", "twin_of", "used", "reaped"]
     search_fields = ["name", "url", "description"]
-    list_filter = ["groups"]
+    list_filter = ["groups", "personal", ("reaped", admin.EmptyFieldListFilter)]
     filter_horizontal = ["groups"]
     inlines = [EndpointInline, BridgeInline]
 

@@ -465,3 +465,14 @@ async def test_the_personal_sims_agent_process_serves_sims_only_and_reaps(monkey
         assert not await sync_to_async(Robot.objects.filter(name=old).exists)()
     finally:
         await manager.shutdown()
+
+
+def test_the_admin_shows_a_sim_as_personal_and_filters_them(school):
+    admin = User.objects.create_superuser("root", password="x")
+    sim = make_sim(school["alice"])["name"]
+    robot = Robot.objects.get(name=sim)
+    pages = signed_in(admin)
+    change = pages.get(reverse("admin:robots_robot_change", args=[robot.pk]))
+    assert change.status_code == 200 and "personal sim" in change.content.decode()
+    listing = pages.get(reverse("admin:robots_robot_changelist"), {"personal__exact": "1"})
+    assert listing.status_code == 200 and sim in listing.content.decode()
