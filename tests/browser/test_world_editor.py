@@ -17,11 +17,22 @@ EDIT_URL = re.compile(r"/worlds/(\d+)/edit$")
 
 
 @pytest.fixture
-def page(new_page) -> Page:
+def page(new_page):
+    """Signed in as admin, at 1366 px; no script error or CSP refusal on it by the end (the
+    API's 422s, which the console reports as failed loads, are expected)."""
     page = new_page()
     page.set_viewport_size({"width": 1366, "height": 900})
+    errors = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+
+    def console(message) -> None:
+        if message.type == "error" and not message.text.startswith("Failed to load resource"):
+            errors.append(message.text)
+
+    page.on("console", console)
     sign_in(page)
-    return page
+    yield page
+    assert not errors, errors
 
 
 def screen(page: Page, x: float, y: float) -> tuple[float, float]:
