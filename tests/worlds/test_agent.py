@@ -58,7 +58,8 @@ async def test_sim_opens_in_its_stored_world_and_follows_saves():
         assert agent.driver.is_open and agent.link_error is None
         assert agent.driver.world_doc() == world.document
         moved = corridor(start=[{"x": -1.5, "y": 1.0, "theta": 0.0}])
-        saved = await sync_to_async(api_of(alice))("PUT", f"/api/worlds/{world.pk}", moved)
+        call = await sync_to_async(api_of)(alice)
+        saved = await sync_to_async(call)("PUT", f"/api/worlds/{world.pk}", moved)
         assert saved.status_code == 200
         # robot.reconfigure: the agent reopens the robot in the new version.
         await until(lambda: agent.driver.world_doc() == saved.json()["document"])
