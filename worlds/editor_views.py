@@ -35,10 +35,11 @@ def blank_document() -> dict:
     }
 
 
-def editor(request, document: dict, *, world_id=None, can_edit: bool, heading: str):
+def editor(request, document: dict, *, world_id=None, builtin="", can_edit: bool, heading: str):
     data = {
         "world": document,
         "id": world_id,
+        "builtin": builtin,  # its name: a sim in it is made by that name
         "can_edit": can_edit,
         "api": "/api/worlds",
         "edit_url": reverse("world-edit", args=[0]),
@@ -67,4 +68,4 @@ def world_builtin(request, name: str):
         raise Http404(_("No such world."))
     title = builtin_title(name)  # in the reader's language, and so its copy's
     document = {**builtin_worlds()[name], "title": title}
-    return editor(request, document, can_edit=False, heading=title)
+    return editor(request, document, builtin=name, can_edit=False, heading=title)

@@ -272,10 +272,11 @@ def test_a_sim_in_the_drawn_world_stops_before_the_drawn_wall(page, appliance, s
     world_id = save(page)
     screenshot(page, "world-editor-wall-ahead")
 
-    # A sim of one's own in that world (sim://?world=<id>), as a teacher tries one.
-    response = appliance.api("POST", "/api/sims", {"world": world_id})
-    assert response.status_code == 201, response.text
-    robot = response.json()["name"]
+    # "Try it in a sim": a sim of one's own in that world (POST /api/sims {world}), its page.
+    button(page, "Try it in a sim").click()
+    expect(page).to_have_url(re.compile(r"/robots/[\w-]+/$"))
+    robot = page.url.rstrip("/").rsplit("/", 1)[1]
+    assert appliance.api("GET", f"/api/robots/{robot}").json()["url"] == f"sim://?world={world_id}"
     wait_for(lambda: appliance.api("GET", f"/api/robots/{robot}/sensors").status_code == 200,
              what="the new sim's agent")  # fmt: skip
     start = appliance.api("GET", f"/api/robots/{robot}/sensors").json()["position"]

@@ -225,7 +225,7 @@
     };
 
     function label(g, text, x, y, size, cls) {
-      var t = el("text", { x: x, y: -y, "font-size": round(size), class: cls }, g);
+      var t = el("text", { x: x, y: -y, "font-size": round(Math.max(size, 11 * pixel)), class: cls }, g);  // readable on a phone
       t.textContent = text || "";
       return t;
     }
@@ -746,21 +746,46 @@
 
     // -- saving ---------------------------------------------------------------------------
 
+    // Resolves true once the document is stored.
     function save() {
-      if (!canEdit || busy) return;
+      if (!canEdit || busy) return Promise.resolve(false);
       busy = true;
       say(gettext("Saving…"), "busy");
       if (!doc.name) { doc.name = slug(doc.title) || "world"; commit(); }
       var body = JSON.stringify(doc);
-      fetch(worldId ? data.api + "/" + worldId : data.api, {
-        method: worldId ? "PUT" : "POST", body: body, credentials: "same-origin",
-        headers: { "Content-Type": "application/json", "X-CSRFToken": window.robotideCookie("csrftoken") },
-      }).then(function (response) {
-        return response.json().then(function (answer) { answered(response, answer, body); },
-          function () { say(interpolate(gettext("The server answered %(status)s"), { status: response.status }, true), "error"); });
+      return send(worldId ? data.api + "/" + worldId : data.api, worldId ? "PUT" : "POST", body).then(function (response) {
+        return response.json().then(function (answer) { answered(response, answer, body); return response.ok; },
+          function () { say(interpolate(gettext("The server answered %(status)s"), { status: response.status }, true), "error"); return false; });
       }, function () {
         say(gettext("Not saved: the server cannot be reached. Your drawing is still here."), "error");
+        return false;
       }).finally(function () { busy = false; });
+    }
+
+    function send(url, method, body) {
+      return fetch(url, {
+        method: method, body: body, credentials: "same-origin",
+        headers: { "Content-Type": "application/json", "X-CSRFToken": window.robotideCookie("csrftoken") },
+      });
+    }
+
+    // A sim of the user's own in this world (saved first), and to its page: where a teacher
+    // tries what she drew.
+    function tryInSim() {
+      var stored = canEdit && (!worldId || history[at] !== savedText) ? save() : Promise.resolve(true);
+      stored.then(function (ok) {
+        if (!ok || busy) return;
+        busy = true;
+        say(gettext("Making a sim in this world…"), "busy");
+        send("/api/sims", "POST", JSON.stringify({ world: worldId || data.builtin })).then(function (response) {
+          return response.json().then(function (answer) {
+            if (response.ok) window.location.assign("/robots/" + encodeURIComponent(answer.name) + "/");
+            else say(typeof answer.detail === "string" ? answer.detail : gettext("Failed"), "error");
+          });
+        }, function () {
+          say(gettext("The server cannot be reached."), "error");
+        }).finally(function () { busy = false; });
+      });
     }
 
     function answered(response, answer, body) {
@@ -828,6 +853,7 @@
     }
 
     saveButton.addEventListener("click", save);
+    document.getElementById("we-try").addEventListener("click", tryInSim);
     if (copyButton) {
       copyButton.addEventListener("click", function () {
         canEdit = true;
