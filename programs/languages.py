@@ -43,6 +43,9 @@ class Language:
     # a file with `compiled_extension`
     compiler: Callable[[str], str] | None = None
     compiled_extension: str = ""
+    # What its programs sleep and read the clock with, as tested at a sim's speed above 1x
+    # (runbox.timescale, tests/clients/test_sim_speed.py): the Languages page lists them.
+    clock: str = ""
 
     def interpreter_path(self) -> str | None:
         for candidate in self.interpreter:
@@ -179,6 +182,7 @@ LANGUAGES: dict[str, Language] = {
     for lang in [
         Language(
             name="python",
+            clock="time.sleep, time.monotonic, time.time",
             label="Python",
             extension=".py",
             interpreter=("python3",),
@@ -191,6 +195,7 @@ LANGUAGES: dict[str, Language] = {
         ),
         Language(
             name="blocks",
+            clock="wait (time.sleep)",
             label=_("Blocks"),
             extension=".json",
             interpreter=("python3",),
@@ -204,6 +209,7 @@ LANGUAGES: dict[str, Language] = {
         ),
         Language(
             name="shell",
+            clock="sleep, date",
             label="Shell",
             extension=".sh",
             interpreter=("bash", "sh"),
@@ -214,6 +220,7 @@ LANGUAGES: dict[str, Language] = {
         ),
         Language(
             name="perl",
+            clock="sleep, Time::HiRes",
             label="Perl",
             extension=".pl",
             interpreter=("perl",),
@@ -224,6 +231,7 @@ LANGUAGES: dict[str, Language] = {
         ),
         Language(
             name="ruby",
+            clock="sleep, Process.clock_gettime",
             label="Ruby",
             extension=".rb",
             interpreter=("ruby",),
@@ -235,6 +243,7 @@ LANGUAGES: dict[str, Language] = {
         ),
         Language(
             name="lua",
+            clock="socket.sleep, socket.gettime",
             label="Lua",
             extension=".lua",
             interpreter=("lua5.4", "lua"),
@@ -245,6 +254,7 @@ LANGUAGES: dict[str, Language] = {
         ),
         Language(
             name="javascript",
+            clock="setTimeout, process.hrtime, Date.now (libuv)",
             label="JavaScript (Node.js)",
             extension=".js",
             interpreter=("node", "nodejs"),
@@ -255,6 +265,7 @@ LANGUAGES: dict[str, Language] = {
         ),
         Language(
             name="tcl",
+            clock="after, clock",
             label="Tcl",
             extension=".tcl",
             interpreter=("tclsh", "tclsh8.6"),
