@@ -213,6 +213,27 @@ def test_select_move_and_delete(page, appliance):
     expect(page.locator("#we-form-title")).to_have_text("The world")
 
 
+VIEW = "document.getElementById('we-canvas').viewBox.baseVal"
+
+
+def test_zoomed_in_the_drawing_is_still_where_the_pointer_is(page, appliance):
+    page.goto("/worlds/new")
+    whole = page.evaluate(f"() => {VIEW}.width")
+    page.locator("#we-canvas").focus()
+    page.keyboard.press("+")
+    page.keyboard.press("+")
+    page.wait_for_function(f"w => {VIEW}.width < w", arg=whole / 2)
+    # Looking around: the floor dragged to the left shows what is east of the centre.
+    drag(page, (0.5, -0.5), (-0.1, -0.5))
+    page.wait_for_function(f"() => {VIEW}.x > -1")
+    button(page, "Wall").click()
+    drag(page, (0.5, 0.3), (1.2, 0.3))
+    expect(page.locator("#we-f-from-x")).to_have_value("0.5")
+    expect(page.locator("#we-f-to-x")).to_have_value("1.2")
+    button(page, "Whole arena").click()
+    page.wait_for_function(f"w => {VIEW}.width === w", arg=whole)
+
+
 @pytest.mark.parametrize("width", [390, 1366])
 def test_the_editor_fits_and_draws_by_touch(new_page, appliance, width, screenshot):
     height = 844 if width == 390 else 900

@@ -130,10 +130,32 @@
 
     var pixel = 0.01;  // m a screen pixel spans, as last drawn
 
+    // The zoom: 1 shows the whole arena; more, a part of it around `centre` (SVG units).
+    var zoom = 1, centre = [0, 0], ZOOM_MAX = 20;
+
+    function viewBox() {
+      var w = doc.size.width + 2 * margin(), h = doc.size.height + 2 * margin();
+      if (zoom <= 1) return [-w / 2, -h / 2, w, h];
+      var vw = w / zoom, vh = h / zoom;
+      // The centre stays where the view is within the arena's drawing.
+      centre = [Math.max(-w / 2 + vw / 2, Math.min(w / 2 - vw / 2, centre[0])), Math.max(-h / 2 + vh / 2, Math.min(h / 2 - vh / 2, centre[1]))];
+      return [centre[0] - vw / 2, centre[1] - vh / 2, vw, vh];
+    }
+
+    // Zooms by `factor` keeping the SVG point `at` (default: the view's centre) where it is.
+    function zoomBy(factor, at) {
+      var before = zoom, box = viewBox();
+      at = at || [box[0] + box[2] / 2, box[1] + box[3] / 2];
+      zoom = Math.max(1, Math.min(ZOOM_MAX, zoom * factor));
+      centre = [at[0] + (box[0] + box[2] / 2 - at[0]) * before / zoom, at[1] + (box[1] + box[3] / 2 - at[1]) * before / zoom];
+      render();
+    }
+
     function draw() {
-      var w = doc.size.width, h = doc.size.height, m = margin();
-      pixel = (w + 2 * m) / (svg.clientWidth || 600);
-      svg.setAttribute("viewBox", [-w / 2 - m, -h / 2 - m, w + 2 * m, h + 2 * m].map(round).join(" "));
+      var w = doc.size.width, h = doc.size.height, m = margin(), box = viewBox();
+      pixel = box[2] / (svg.clientWidth || 600);
+      svg.setAttribute("viewBox", box.map(round).join(" "));
+      svg.classList.toggle("zoomed", zoom > 1);
       // Its shape is the arena's: CSS keeps it within the screen's height by this ratio.
       svg.style.setProperty("--we-ratio", String((w + 2 * m) / (h + 2 * m)));
       while (svg.firstChild) svg.removeChild(svg.firstChild);
@@ -288,6 +310,7 @@
           if (canEdit) drag = { mode: "move", from: p, original: JSON.stringify(item(selected)) };
         } else {
           select(null);
+          if (zoom > 1) drag = { mode: "pan", at: [event.clientX, event.clientY], centre: centre.slice() };
         }
       } else {
         drag = { mode: "draw", from: p };
@@ -299,6 +322,11 @@
 
     svg.addEventListener("pointermove", function (event) {
       if (!drag || !event.isPrimary) return;
+      if (drag.mode === "pan") {
+        centre = [drag.centre[0] - (event.clientX - drag.at[0]) * pixel, drag.centre[1] - (event.clientY - drag.at[1]) * pixel];
+        render();
+        return;
+      }
       var raw = worldPoint(event), p = snapPoint(raw);
       if (drag.mode === "draw") draft.item = drafted(tool, drag.from, p, raw, draft.item);
       else if (drag.mode === "move") moveTo(JSON.parse(drag.original), p[0] - drag.from[0], p[1] - drag.from[1], raw);
@@ -312,12 +340,20 @@
       var mode = drag.mode;
       drag = null;
       if (mode === "draw") finishDraft();
-      else commit();
+      else if (mode !== "pan") commit();
     });
+
+    // Ctrl + the wheel (a touchpad's pinch) zooms where the pointer is.
+    svg.addEventListener("wheel", function (event) {
+      if (!event.ctrlKey) return;
+      event.preventDefault();
+      var p = worldPoint(event);
+      zoomBy(Math.exp(-event.deltaY / 300), [p[0], -p[1]]);
+    }, { passive: false });
 
     svg.addEventListener("pointercancel", function () {
       if (!drag) return;
-      if (drag.mode !== "draw") doc = JSON.parse(history[at]);
+      if (drag.mode !== "draw" && drag.mode !== "pan") doc = JSON.parse(history[at]);
       drag = draft = null;
       render();
       buildForm();
@@ -497,10 +533,20 @@
         if ((event.key === "Delete" || event.key === "Backspace") && selected) { event.preventDefault(); deleteSelected(); return; }
         var arrow = { ArrowLeft: [-1, 0], ArrowRight: [1, 0], ArrowUp: [0, 1], ArrowDown: [0, -1] }[event.key];
         if (arrow && selected && canEdit) { event.preventDefault(); nudge(arrow); return; }
+        if (arrow && zoom > 1) { event.preventDefault(); pan(arrow); return; }
+        if (event.key === "+" || event.key === "=") { zoomBy(1.5); return; }
+        if (event.key === "-") { zoomBy(1 / 1.5); return; }
+        if (event.key === "0") { zoom = 1; render(); return; }
         if (event.key === "Enter" && event.target === svg && tool !== "select" && canEdit) { event.preventDefault(); addAtCentre(); return; }
       }
       if (SHORTCUTS[key]) useTool(SHORTCUTS[key]);
     });
+
+    function pan(direction) {
+      var box = viewBox();
+      centre = [centre[0] + direction[0] * box[2] / 5, centre[1] - direction[1] * box[3] / 5];
+      render();
+    }
 
     // The keyboard's way to move: one grid step (a centimetre without the grid).
     function nudge(direction) {
@@ -522,6 +568,9 @@
       document.getElementById("we-form").querySelector("input:not([disabled])").focus();
     }
 
+    document.getElementById("we-zoom-in").addEventListener("click", function () { zoomBy(1.5); });
+    document.getElementById("we-zoom-out").addEventListener("click", function () { zoomBy(1 / 1.5); });
+    document.getElementById("we-zoom-fit").addEventListener("click", function () { zoom = 1; render(); });
     undoButton.addEventListener("click", function () { restore(-1); });
     redoButton.addEventListener("click", function () { restore(1); });
     deleteButton.addEventListener("click", deleteSelected);
