@@ -45,8 +45,8 @@ def no_robot_reason(user, visible=None) -> str:
     if sim:
         return _(
             "No robot is open to you yet: robots belong to classes, and none of your classes"
-            " has one. Run on a simulated robot of your own (My sim on the workbench; POST"
-            " /api/sims), or ask your teacher to add a robot to your class."
+            " has one. Ask your teacher to add a robot to your class, or run on a simulated"
+            " robot of your own (My sim on the workbench; POST /api/sims)."
         )
     return _(
         "No robot is open to you yet: robots belong to classes, and none of your classes has"

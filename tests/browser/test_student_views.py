@@ -43,10 +43,10 @@ SIZES = {"phone": (390, 844), "desktop": (1366, 860)}
 @pytest.fixture(scope="module")
 def appliance(tmp_path_factory):
     """Its own appliance: a shown value leaves 2 s after its run ended; nora's class has no
-    robot, ann's and ben's has sim."""
-    app = Appliance(
-        tmp_path_factory.mktemp("students"), extra_env={"ROBOTIDE_SHOWS_KEEP_SECONDS": "2"}
-    ).start()
+    robot, ann's and ben's has sim; no personal sims (with them, nora runs on her own "My
+    sim": tests/browser/test_my_sim.py, tests/robots/test_sims.py)."""
+    env = {"ROBOTIDE_SHOWS_KEEP_SECONDS": "2", "ROBOTIDE_SIMS_PER_USER": "0"}
+    app = Appliance(tmp_path_factory.mktemp("students"), extra_env=env).start()
     app.tokens = {name: app.new_user(name, PASSWORD) for name in ("nora", "ann", "ben")}
     app.cli("manage", "shell", "-c", CLASSES)
     yield app

@@ -292,7 +292,7 @@ def test_a_student_with_no_robot_of_her_class_runs_on_my_sim(school):
     pages = signed_in(carol)
     editor = html.unescape(pages.get(reverse("program-edit", args=[program.pk])).content.decode())
     assert '<option value="+sim">My sim (new)</option>' in editor
-    assert "Run on a simulated robot of your own" in editor and 'id="sim-note"' in editor
+    assert "or run on a simulated robot of your own" in editor and 'id="sim-note"' in editor
     run_button = editor[editor.index('value="run"') :]
     assert "disabled" not in run_button[: run_button.index(">")]
     started = pages.post(
