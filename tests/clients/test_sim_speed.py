@@ -136,13 +136,16 @@ async def test_a_second_of_sleep_is_a_second_of_the_sims_time_at_10x(language, t
         ran = await run_program(agent, language, sleep_program(language), tmp_path)
     assert ran.status == 0, ran.err
     sim, *own = map(float, ran.out.split())
-    # The sim's clock across the sleep: the second slept, and the calls around it (a
-    # shell's `robot` is a process started at each call: a few tenths at 10x). Without the
-    # program's clock sped up it would be 10 s.
-    assert 1.0 <= sim < 2.5, ran.out
-    if own:  # the program's own clock across the same calls and more: the same rate
-        assert own[0] >= sim - 0.01, ran.out
-    assert ran.seconds < 5, ran  # the whole program, start-up included, in real time
+    # The sim's clock across the sleep: the second slept, and the calls around it (a shell's
+    # `robot` is a process started at each call: a few tenths at 10x, more on a busy machine).
+    assert sim >= 1.0, ran.out
+    if own:
+        # The program's own clock across the same calls and more: as far at least, at the same
+        # rate. Were it the real clock, the sim's would be 10 s to its 1.
+        assert sim <= own[0] + 0.01, ran.out
+    else:  # Blocks: Python's clock, without a block that reads it
+        assert sim < 5.0, ran.out
+    assert ran.seconds < 10, ran  # the whole program, start-up included, in real time
 
 
 async def test_at_1x_a_second_is_a_real_one(tmp_path):
