@@ -108,8 +108,8 @@
     function snap(v) { return snapping() ? round(Math.round(v / step()) * step()) : round(v); }
     function snapPoint(p) { return [snap(p[0]), snap(p[1])]; }
     function snapAngle(a) {
-      var quarter = Math.PI / 12;  // 15°
-      return snapping() ? Math.round(a / quarter) * quarter : a;
+      var notch = Math.PI / 12;  // 15°
+      return snapping() ? Math.round(a / notch) * notch : a;
     }
 
     // -- drawing --------------------------------------------------------------------------
@@ -175,6 +175,8 @@
       var g = el("g", { class: "we-grid" }, svg);
       var minor = step();
       if (!snapping() || Math.max(w, h) / minor > 250) minor = 1;
+      // Never thousands of lines (an arena typed far too large, refused when saved).
+      while (Math.max(w, h) / minor > 250) minor *= 10;
       function lines(size, other, vertical) {
         for (var i = Math.ceil(-size / 2 / minor); i * minor <= size / 2 + 1e-9; i++) {
           var v = round(i * minor);
@@ -601,6 +603,7 @@
         ["facing", gettext("Facing (°)"), "deg"], ["size", gettext("Size (m)"), "m"], ["height", gettext("Height above the floor (m)"), "m"]],
       start: [["x", gettext("x (m)"), "m"], ["y", gettext("y (m)"), "m"], ["theta", gettext("Heading (°, 0 = east, 90 = north)"), "deg"]],
     };
+    var POSITIVE = ["size.width", "size.height", "width", "height", "thickness", "size", "robot.radius"];
     var TITLES = {
       world: function () { return gettext("The world"); },
       walls: function (i) { return interpolate(gettext("Wall %(n)s"), { n: i + 1 }, true); },
@@ -770,6 +773,7 @@
       if (i.value === "" && i.placeholder) { setPath(it, key, undefined); return; }  // back to the default
       if (i.value === "" || !isFinite(Number(i.value))) return;
       var n = Number(i.value);
+      if (n <= 0 && POSITIVE.indexOf(key) >= 0) return;  // a size: the drawing needs one
       if (type === "pair") getPath(it, key)[i.id.slice(-1) === "x" ? 0 : 1] = n;
       else setPath(it, key, type === "deg" ? round(n / DEG) : n);
     }
