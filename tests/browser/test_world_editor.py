@@ -340,3 +340,29 @@ def test_the_editor_passes_axe_and_works_from_the_keyboard(page, appliance):
     expect(page.locator("#we-f-from-y")).to_have_value("0.1")
     page.keyboard.press("Delete")
     expect(drawn(page, "walls")).to_have_count(0)
+
+
+def test_a_world_shared_to_read_is_copied_to_edit_and_hidden_from_others(new_page, appliance):
+    doc = {"format": 1, "name": "shared-one", "title": "Shared one",
+           "size": {"width": 3, "height": 3}, "walls": [{"from": [-1, 1], "to": [1, 1]}],
+           "start": [{"x": 0, "y": 0, "theta": 0}]}  # fmt: skip
+    appliance.new_user("bobw")
+    appliance.new_user("carolw")
+    world = appliance.api("POST", "/api/worlds", doc).json()
+    shared = appliance.api("POST", f"/api/worlds/{world['id']}/shares", {"user": "bobw"})
+    assert shared.status_code == 201, shared.text
+    carol = new_page()
+    sign_in(carol, "carolw", "user-pass-1234")
+    assert carol.goto(f"/worlds/{world['id']}/edit").status == 404
+    bob = new_page()
+    sign_in(bob, "bobw", "user-pass-1234")
+    bob.goto(f"/worlds/{world['id']}/edit")
+    expect(drawn(bob, "walls")).to_have_count(1)
+    expect(button(bob, "Save")).to_be_hidden()
+    button(bob, "Copy to edit").click()
+    copy_id = save(bob)
+    assert copy_id != world["id"]
+    copy = appliance.api("GET", f"/api/worlds/{copy_id}").json()
+    assert copy["owner"] == "bobw" and len(copy["document"]["walls"]) == 1
+    original = appliance.api("GET", f"/api/worlds/{world['id']}").json()
+    assert original["owner"] == "admin" and original["revision"] == 1
