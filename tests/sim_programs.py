@@ -9,8 +9,10 @@ run by its language's interpreter with the command line and environment a run ge
 import asyncio
 import contextlib
 import math
+import os
 import random
 import shutil
+import signal
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -82,11 +84,12 @@ async def run_program(
     process = await asyncio.create_subprocess_exec(
         *argv, env=env, cwd=folder, stdin=asyncio.subprocess.DEVNULL,
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+        start_new_session=True,  # its children end with it (a shell's `sleep`, `robot`)
     )  # fmt: skip
     try:
         out, err = await asyncio.wait_for(process.communicate(), deadline)
     except TimeoutError:
-        process.kill()
+        os.killpg(process.pid, signal.SIGKILL)
         out, err = await process.communicate()
     finally:
         forget_shared_clock(process.pid)

@@ -11,7 +11,7 @@ itself, successfully, with the robot stopped and inside nothing.
 The poses are near a wall or a box (up to 0.25 m from touching it), heading along it or into
 it at a glancing angle (tests.sim_programs.grazing_poses): poses drawn anywhere with any
 heading rarely meet a surface so (on the sim of old, 1 of these 100 runs from such poses
-jammed); from these, 4 to 7 of 10 runs of Wall and turn jammed there.
+jammed); from these, each of the ten examples jammed from 4 of the 10 poses there.
 """
 
 import asyncio
