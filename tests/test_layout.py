@@ -33,6 +33,29 @@ def test_the_process_model_and_the_hardware_layer_load_without_django():
     assert done.stdout.strip() == "[]", done.stdout
 
 
+def test_the_simulator_loads_without_django_and_the_real_robots_drivers():
+    """rhal.simulator (issue 30) is plain Python: its worlds load and validate (shapely
+    included) without Django, the web apps, or the CAN and NXT drivers' modules."""
+    modules = sorted(f"rhal.simulator.{p.stem}" for p in (ROOT / "rhal/simulator").glob("*.py"))
+    code = (
+        "import importlib, sys\n"
+        f"for name in {modules!r}:\n"
+        "    importlib.import_module(name)\n"
+        "from rhal.simulator import worlds\n"
+        "for name, doc in worlds.BUILTIN.items():\n"
+        "    worlds.World.from_doc(doc)\n"
+        "web = {'django', 'programs', 'robots', 'robotide', 'channels', 'worlds'}\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in web"
+        " or m.startswith(('rhal.canbus', 'rhal.nxt_'))))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60,
+        env={"PATH": "/usr/bin:/bin"},
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]", done.stdout
+
+
 def module_imports(path: Path, package: str) -> set[str]:
     """What a module imports of programs/ and robots/ when it is loaded (its top level, not
     inside functions), as module names."""
