@@ -120,6 +120,38 @@ time.sleep(300)
 
 
 @pytest.mark.parametrize("mode", MODES)
+def test_a_stop_reaches_a_daemon_the_run_left_behind(mode, readable_copy):
+    """Grandchildren in a session of their own, one whose parent waits for it and one whose
+    parent is gone (adopted by the box's first process): the stop's SIGTERM finds both
+    (Box.processes walks down the children from the box's first process)."""
+    source = """
+import os, signal, time
+def daemon(name, parent_stays):
+    if os.fork() == 0:
+        os.setsid()
+        if os.fork() == 0:
+            def ended(*_):
+                print(name, "got TERM", flush=True)
+                os._exit(0)
+            signal.signal(signal.SIGTERM, ended)
+            print(name, "ready", flush=True)
+            time.sleep(300)
+        if parent_stays:
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+            os.wait()
+        os._exit(0)
+daemon("orphan", False)
+daemon("grandchild", True)
+time.sleep(300)
+"""
+    result = box_run(mode, readable_copy, source, stop_on="grandchild ready", grace=5.0)
+    assert result["state"] == "stopped", result
+    assert "orphan got TERM" in result["log"], result["log"]
+    assert "grandchild got TERM" in result["log"], result["log"]
+    assert result["left"] == []
+
+
+@pytest.mark.parametrize("mode", MODES)
 def test_the_run_cannot_make_namespaces_or_mount(mode, readable_copy):
     source = """
 import subprocess
