@@ -476,3 +476,19 @@ def test_the_admin_shows_a_sim_as_personal_and_filters_them(school):
     assert change.status_code == 200 and "personal sim" in change.content.decode()
     listing = pages.get(reverse("admin:robots_robot_changelist"), {"personal__exact": "1"})
     assert listing.status_code == 200 and sim in listing.content.decode()
+
+
+def test_the_program_lists_run_offers_my_sim_too(school):
+    """Scripts or not: the program list's Run with "My sim (new)" makes the sim and runs."""
+    alice = school["alice"]
+    program = program_of(alice)
+    pages = signed_in(alice)
+    listing = html.unescape(pages.get(reverse("program-list")).content.decode())
+    assert '<option value="+sim">My sim (new)</option>' in listing
+    ran = pages.post(reverse("program-run", args=[program.pk]), {"robot": "+sim"})
+    run = Run.objects.get(robot__name="sim-alice-1", owner=alice)
+    assert ran.status_code == 302 and ran["Location"] == reverse("run-detail", args=[run.pk])
+    # Her sim is the choice from then on, and nothing more is made.
+    listing = html.unescape(pages.get(reverse("program-list")).content.decode())
+    assert "My sim (new)" not in listing
+    assert '<input type="hidden" name="robot" value="sim-alice-1">' in listing  # her one robot
