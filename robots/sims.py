@@ -45,15 +45,15 @@ from django.utils.translation import ngettext
 import rhal
 from programs.models import Run
 from rhal.registry import driver_class
-from robots.bus import ask_agent_sync, blocking
+from robots.bus import announce_robot_sync, ask_agent_sync, blocking
 from robots.models import Robot, get_robot_for_user, manager_channel
 from robots.runs import RunRefused
+from worlds.resolve import WorldUnavailable, find_world
 
 log = logging.getLogger(__name__)
 
 #: The workbench's choice "My sim": the user's sim, made when they first run on it.
 MY_SIM = "+sim"
-BUILTIN_WORLDS = ("boxes", "square", "maze", "line", "rooms")
 REAP_EVERY = 60.0  # seconds between the reaper's looks
 TOUCH_EVERY = timedelta(minutes=1)  # `used` is written at most this often (not per page view)
 TWIN_ASK_TIMEOUT = 1.0  # s the twin waits for the real robot's agent before reading its driver
@@ -179,8 +179,6 @@ def my_sim(user) -> Robot:
 def announce(name: str) -> None:
     """Its agent starts (embedded mode: the web process's AgentManager; fleet mode: ``robotide
     agent --personal-sims``). Not sure to be heard: the robot is made all the same."""
-    from robots.bus import announce_robot_sync
-
     try:
         announce_robot_sync(name)
     except Exception:  # the channel layer away: its agent starts with the next manager start
@@ -190,24 +188,11 @@ def announce(name: str) -> None:
 def world_value(user, world) -> str:
     """What the sim's URL names as its world: a built-in's name, or a stored world's id (it
     stays the same world when renamed); UnknownWorld if ``user`` may use none such."""
-    if isinstance(world, str) and world.removeprefix("builtin:") in BUILTIN_WORLDS:
-        return world.removeprefix("builtin:")
-    try:
-        from worlds.resolve import WorldUnavailable, find_world
-    except ImportError:  # no stored worlds here
-        raise UnknownWorld(_unknown_world(world)) from None
     try:
         found = find_world(world, user)
     except WorldUnavailable as exc:
         raise UnknownWorld(str(exc)) from None
     return found if isinstance(found, str) else str(found.pk)
-
-
-def _unknown_world(world) -> str:
-    return _("no world %(world)s: a built-in world is one of %(names)s") % {
-        "world": repr(world),
-        "names": ", ".join(BUILTIN_WORLDS),
-    }
 
 
 # -- a twin ----------------------------------------------------------------------------------
