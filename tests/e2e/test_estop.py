@@ -52,8 +52,9 @@ def motors_limit(kind, agent) -> float:
 
 
 def commanded(kind, peer, agent) -> tuple[float, float]:
-    """What the robot was last told to do: on its wire, or the simulator's own state."""
-    return agent.driver._command if kind == "sim" else peer.commanded()
+    """What the robot was last told to do: on its wire, or the simulator's own state (its
+    motion model's commanded speeds, rhal.simulator.physics)."""
+    return agent.driver._motion.command_speeds if kind == "sim" else peer.commanded()
 
 
 async def api_call(agent, token: str, method: str, *params) -> dict:
