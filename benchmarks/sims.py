@@ -16,8 +16,10 @@ one viewer, in two ways, one after the other with the same robots and programs:
 Measured per phase, over WINDOW seconds once every run is going: the server's CPU (% of one
 CPU), frames (pose messages or JPEGs) per second reaching each viewer (mean and slowest), and
 the programs' sensors() call time p50/p99 (pooled over all calls of all programs in the
-window). Per count: the server's memory per sim (RSS after the N sims opened, less before, /
-N) and run start (created -> started, from the API) p50/p99 over the 2 x N runs.
+window). Per count: the server's memory per sim (its RSS once the phases ran, runs, viewers
+and all, less its RSS before the first sim, / N) and run start (created -> started, from the API) p50/p99 over the 2 x N runs. The pose stream
+runs at 20 Hz while a sim moves, a little less with timer slack; a browser draws at its
+display's rate between poses, so the figure is the poses reaching each viewer.
 """
 
 from __future__ import annotations
@@ -48,7 +50,7 @@ BENCH = "sims"
 COUNTS = (1, 10, 30)
 WARM = 3.0  # s after the last run started, before the window
 WINDOW = 10.0
-FPS_AIM = 20.0
+FPS_AIM = 19.0  # the stream's 20 Hz less timer slack
 P99_AIM_MS = 10.0
 CLOSING = b"\r\n--frame"  # after each MJPEG part
 
@@ -217,12 +219,11 @@ def run(counts=COUNTS, seconds: float | None = None) -> list[Figure]:
         r.raise_for_status()
         program = r.json()["id"]
         names: list[str] = []
+        rss = proc_status(app.server.pid)["VmRSS"]
         for n in counts:
-            rss = proc_status(app.server.pid)["VmRSS"]
             added = [f"bench-sim-{i}" for i in range(len(names), n)]
             add_sims(api, added)
             names += added
-            per_sim = (proc_status(app.server.pid)["VmRSS"] - rss) / max(1, len(added)) / MB
             starts = []
             results = {}
             for how in ("jpeg", "drawn"):
@@ -235,6 +236,7 @@ def run(counts=COUNTS, seconds: float | None = None) -> list[Figure]:
                     f" frames/s per viewer (slowest {result['slowest']:.1f}), sensors() p50"
                     f" {result['p50']:.2f} ms p99 {result['p99']:.2f} ms"
                     f" ({result['calls']} calls)")  # fmt: skip
+            per_sim = (proc_status(app.server.pid)["VmRSS"] - rss) / n / MB
             p50, p99 = percentile(starts, 50), percentile(starts, 99)
             say(f"{n} sims: {per_sim:.2f} MB per sim; run start p50 {p50:.0f} ms p99 {p99:.0f} ms")
             figures += figures_of(n, results, per_sim, starts)
@@ -250,7 +252,7 @@ def figures_of(n: int, results: dict, per_sim: float, starts: list[float]) -> li
         Figure(BENCH, f"{label}, drawn: server CPU / server-drawn", drawn["cpu"] / jpeg["cpu"],
                "x"),
         Figure(BENCH, f"{label}, drawn: poses/s per viewer", drawn["fps"], "fps",
-               target=f">= {FPS_AIM:g} (slowest)", ok=drawn["slowest"] >= FPS_AIM * 0.95,
+               target=f">= {FPS_AIM:g} (slowest)", ok=drawn["slowest"] >= FPS_AIM,
                note=f"slowest {drawn['slowest']:.1f}; JPEG {jpeg['fps']:.1f}"
                     f" (slowest {jpeg['slowest']:.1f})"),
         Figure(BENCH, f"{label}, drawn: sensors() p99", drawn["p99"], "ms",
