@@ -17,9 +17,10 @@ Measured per phase, over WINDOW seconds once every run is going: the server's CP
 CPU), frames (pose messages or JPEGs) per second reaching each viewer (mean and slowest), and
 the programs' sensors() call time p50/p99 (pooled over all calls of all programs in the
 window). Per count: the server's memory per sim (its RSS once the phases ran, runs, viewers
-and all, less its RSS before the first sim, / N) and run start (created -> started, from the API) p50/p99 over the 2 x N runs. The pose stream
-runs at 20 Hz while a sim moves, a little less with timer slack; a browser draws at its
-display's rate between poses, so the figure is the poses reaching each viewer.
+and all, less its RSS before the first sim, / N) and run start (created -> started, from the
+API) p50/p99 over the 2 x N runs. The pose stream runs at 20 Hz while a sim moves, a little
+less with timer slack; a browser draws at its display's rate between poses, so the figure is
+the poses reaching each viewer.
 """
 
 from __future__ import annotations
