@@ -1,5 +1,7 @@
 """A robot's live page: sensor readings, values shown by programs, its running programs."""
 
+import asyncio
+import contextlib
 import json
 import math
 import time
@@ -20,6 +22,7 @@ from robots.bus import send_to_agent
 from robots.models import get_robot_for_user, robot_group
 from robots.readings import ended_runs, runs_seen, sensor_rows, show_items, shows_seen, status
 from robots.say import SayOnSocket, parse_say
+from robots.sim_view import WATCH_RENEW
 
 
 def parse_control(text: str | None) -> tuple[str, tuple[float, float] | None] | None:
@@ -87,8 +90,21 @@ class RobotConsumer(SayOnSocket, DirectDispatch, AsyncWebsocketConsumer):
         # (the workbench's panel is rendered without it).
         await self.robot_runs({})
         await self.robot_stop({})
+        self.watching = None
+        if self.robot.url.startswith("sim:"):  # its agent streams poses while it is watched
+            self.watching = asyncio.create_task(self._watch_poses())
+
+    async def _watch_poses(self) -> None:
+        while True:
+            await send_to_agent(self.robot.name, "pose.watch", viewer=self.channel_name)
+            await asyncio.sleep(WATCH_RENEW)
 
     async def disconnect(self, code):
+        if getattr(self, "watching", None) is not None:
+            self.watching.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self.watching
+            await send_to_agent(self.robot.name, "pose.unwatch", viewer=self.channel_name)
         if getattr(self, "group", None):
             await self.channel_layer.group_discard(self.group, self.channel_name)
             if self.drove:  # a browser that leaves never leaves its robot driving

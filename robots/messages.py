@@ -154,6 +154,8 @@ SCHEMAS: dict[str, dict[str, tuple[Callable, bool]]] = {
     },
     # robots.sim_view (PoseStream.handlers): a sim's world, for pages that draw it
     "robot.world": {},
+    "pose.watch": {"viewer": (_channel, REQUIRED)},
+    "pose.unwatch": {"viewer": (_channel, REQUIRED)},
     # robots.host_services (HostServices.handlers): a phrase typed for listen()
     "robot.hear": {
         "text": (_text(MAX_SAY), REQUIRED),

@@ -7,6 +7,11 @@ at its display's rate, extrapolating along the arc of the last pose's speeds. A 
 costs nothing: the loop sleeps until a drive command wakes it, or the telemetry loop (which
 reads the sensors anyway) sees the pose differ from the last one sent.
 
+Only while someone watches: a page's socket sends ``pose.watch {viewer}`` at once and every
+WATCH_RENEW s (``pose.unwatch`` when it closes); a viewer not heard of for WATCH_LEASE s is
+forgotten. A moving sim nobody watches publishes nothing (30 unwatched moving sims cost a
+quarter of a core before).
+
 ``robot.world {reply_to}`` answers ``{world, robot, speed}``: the world document the sim runs
 in, its robot's shape and sensors, and its time scale (GET /robots/<name>/world.json).
 """
@@ -16,6 +21,8 @@ import asyncio
 import rhal
 
 POSE_RATE = 20.0  # Hz, at most, while the robot moves
+WATCH_RENEW = 3.0  # s between a page's pose.watch messages (as the camera's viewers)
+WATCH_LEASE = 10.0  # a viewer silent this long is forgotten (a crashed web process lets go)
 DIGITS = 4  # 0.1 mm, 0.1 mrad: plenty for a picture, short on the wire
 
 
@@ -78,7 +85,29 @@ class PoseStream:
         self.agent = agent
         self.last: tuple | None = None  # the last pose sent
         self._wake = asyncio.Event()
-        self.handlers = {"robot.world": self.world}
+        self.viewers: dict[str, float] = {}  # viewer -> when its lease ends (loop time)
+        self.handlers = {
+            "robot.world": self.world,
+            "pose.watch": self.watch,
+            "pose.unwatch": self.unwatch,
+        }
+
+    async def watch(self, message: dict) -> None:
+        first = not self.watched
+        self.viewers[message["viewer"]] = asyncio.get_running_loop().time() + WATCH_LEASE
+        if first:  # where it is now, and on from there if it moves
+            self.last = None
+            self._wake.set()
+
+    async def unwatch(self, message: dict) -> None:
+        self.viewers.pop(message["viewer"], None)
+
+    @property
+    def watched(self) -> bool:
+        now = asyncio.get_running_loop().time()
+        for viewer in [v for v, ends in self.viewers.items() if ends < now]:
+            del self.viewers[viewer]
+        return bool(self.viewers)
 
     def wake(self) -> None:
         """A drive command, a stop or a reset went to the robot: look at its pose now."""
@@ -97,7 +126,7 @@ class PoseStream:
         while True:
             await self._wake.wait()
             self._wake.clear()
-            if not is_sim(self.agent.driver):
+            if not is_sim(self.agent.driver) or not self.watched:
                 continue
             before = None  # the last read of this wake's
             while True:
@@ -111,7 +140,7 @@ class PoseStream:
                 before = pose
                 if pose[:-1] != self.last:
                     self._publish(pose)
-                if not moving(pose):
+                if not moving(pose) or not self.watched:
                     break
                 await asyncio.sleep(interval)
 

@@ -9,12 +9,13 @@ import time
 
 import pytest
 from channels.db import database_sync_to_async
+from channels.layers import get_channel_layer
 from django.contrib.auth.models import Group, User
 from django.test import Client
 
 from robots.consumers import RobotConsumer
 from robots.lease import Holder
-from robots.models import Robot
+from robots.models import Robot, robot_group
 from robots.sim_view import PoseStream
 from tests.programs.test_consumers import communicator
 
@@ -167,3 +168,33 @@ async def test_pressing_on_a_wall_is_sent_as_standing_still(sim_agent):
     assert await frames(comm, 1.0) == [], "nothing more while it presses on the wall"
     await sim_agent.stop_motion_of(holder.key)
     await comm.disconnect()
+
+
+async def test_a_moving_sim_nobody_watches_sends_no_poses(sim_agent):
+    """Poses go out only while a page's socket holds a watch: a class's moving sims that
+    nobody looks at cost nothing for drawing. The socket's close ends its watch."""
+    layer = get_channel_layer()
+    listener = await layer.new_channel()
+    await layer.group_add(robot_group("sim"), listener)
+    holder = Holder("teleop", "test-driver", "alice")
+    await sim_agent.drive_for(holder, 0.0, 1.0)
+
+    async def poses_heard(seconds: float) -> int:
+        heard, end = 0, time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0:
+            try:
+                message = await asyncio.wait_for(layer.receive(listener), left)
+            except TimeoutError:
+                break
+            heard += message["type"] == "robot.pose"
+        return heard
+
+    assert await poses_heard(1.0) == 0, "nobody watches: no poses"
+    alice = await database_sync_to_async(User.objects.create_user)("alice")
+    comm = communicator(RobotConsumer, "/ws/robots/sim/", alice, name="sim")
+    assert (await comm.connect())[0]
+    assert await poses_heard(1.0) >= 10, "a page watches: the poses flow"
+    await comm.disconnect()
+    await poses_heard(0.3)  # what was on its way when the watch ended
+    assert await poses_heard(1.0) == 0, "the page left: no poses"
+    await sim_agent.stop_motion_of(holder.key)
