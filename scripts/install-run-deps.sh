@@ -3,7 +3,8 @@
 # --quiet (second) leaves out what an ordinary user is told (said once, when robotide starts).
 # As root: what is missing is installed from Debian's archive: the venv module (python3-venv:
 # a fresh Debian's python3 has none), bubblewrap (the runs' box), slirp4netns and iproute2 (the
-# NAT of network 'full'), libfaketime (a sim's runs faster than real time: runbox/timescale.py).
+# NAT of network 'full'), libfaketime (a sim's runs faster than real time: runbox/timescale.py),
+# fonts-dejavu-core (the words on the sim's pictures, accents included).
 # As an ordinary user runs are boxed with what every Debian machine has (util-linux's unshare
 # and python3); this says what would give them more, and goes on, unless the virtualenv itself
 # cannot be made (without libfaketime a sim whose speed is above 1 refuses its runs, saying so).
@@ -24,6 +25,7 @@ have bwrap || need="$need bubblewrap"
 have slirp4netns || need="$need slirp4netns"
 have ip || need="$need iproute2"
 ls /usr/lib/*/faketime/libfaketime.so.1 >/dev/null 2>&1 || need="$need libfaketime"
+[ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || need="$need fonts-dejavu-core"
 if [ "$(id -u)" -eq 0 ] && [ -n "$need" ]; then
     export DEBIAN_FRONTEND=noninteractive
     apt-get update -qq

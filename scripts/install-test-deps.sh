@@ -3,7 +3,8 @@
 # Chromium (browser tests), util-linux (setpriv, prlimit, unshare), bubblewrap and slirp4netns
 # (the runs' box and the NAT of network 'full'), the languages' interpreters, PostgreSQL and Redis (fleet mode), started
 # if they are not running, espeak-ng and ffmpeg (speech and cameras for programs), OpenLDAP's
-# slapd and ldap-utils (directory sign-in), libfaketime (a sim's runs faster than real time).
+# slapd and ldap-utils (directory sign-in), libfaketime (a sim's runs faster than real time),
+# fonts-dejavu-core (the words on the sim's pictures, accents included).
 set -eu
 need=""
 have() { command -v "$1" >/dev/null 2>&1 || [ -x "/usr/sbin/$1" ] || [ -x "/sbin/$1" ]; }
@@ -13,6 +14,7 @@ have prlimit || need="$need util-linux"
 have bwrap || need="$need bubblewrap"
 have slirp4netns || need="$need slirp4netns"
 ls /usr/lib/*/faketime/libfaketime.so.1 >/dev/null 2>&1 || need="$need libfaketime"
+[ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || need="$need fonts-dejavu-core"
 [ -x /usr/bin/python3 ] || need="$need python3"
 /usr/bin/python3 -c "import ensurepip" 2>/dev/null || need="$need python3-venv"  # make run's .venv
 # The languages programs are written in (programs/languages.py) and what their clients use.
