@@ -28,7 +28,7 @@ class SimIn(Body):
     )
 
 
-@sims_router.post("", response={201: RobotOut, 409: Error, 422: Error})
+@sims_router.post("", response={201: RobotOut, 404: Error, 409: Error})
 def create_sim(request, data: SimIn | None = None):
     """A new simulated robot of your own, its agent started: only you, your teachers and staff
     see it, and only your programs run on it (nobody queues). Each run starts at its world's

@@ -4,30 +4,53 @@ from django.db import migrations, models
 
 
 class Migration(migrations.Migration):
-
     dependencies = [
-        ('robots', '0012_isolation_longer'),
+        ("robots", "0012_isolation_longer"),
     ]
 
     operations = [
         migrations.AddField(
-            model_name='robot',
-            name='personal',
-            field=models.BooleanField(default=False, editable=False, help_text="A user's own simulated robot: only they, their teachers and staff see it", verbose_name='personal sim'),
+            model_name="robot",
+            name="personal",
+            field=models.BooleanField(
+                default=False,
+                editable=False,
+                help_text="A user's own simulated robot:"
+                " only they, their teachers and staff see it",
+                verbose_name="personal sim",
+            ),
         ),
         migrations.AddField(
-            model_name='robot',
-            name='reaped',
-            field=models.DateTimeField(blank=True, editable=False, help_text='A personal sim removed (idle, or by its owner); kept for its runs', null=True, verbose_name='removed'),
+            model_name="robot",
+            name="reaped",
+            field=models.DateTimeField(
+                blank=True,
+                editable=False,
+                help_text="A personal sim removed (idle, or by its owner); kept for its runs",
+                null=True,
+                verbose_name="removed",
+            ),
         ),
         migrations.AddField(
-            model_name='robot',
-            name='twin_of',
-            field=models.CharField(blank=True, editable=False, help_text='The robot whose speeds and sensors it copies', max_length=50, verbose_name='twin of'),
+            model_name="robot",
+            name="twin_of",
+            field=models.CharField(
+                blank=True,
+                editable=False,
+                help_text="The robot whose speeds and sensors it copies",
+                max_length=50,
+                verbose_name="twin of",
+            ),
         ),
         migrations.AddField(
-            model_name='robot',
-            name='used',
-            field=models.DateTimeField(blank=True, editable=False, help_text='A personal sim: made, chosen, reset or run on', null=True, verbose_name='last used'),
+            model_name="robot",
+            name="used",
+            field=models.DateTimeField(
+                blank=True,
+                editable=False,
+                help_text="A personal sim: made, chosen, reset or run on",
+                null=True,
+                verbose_name="last used",
+            ),
         ),
     ]
