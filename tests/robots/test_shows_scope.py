@@ -45,9 +45,10 @@ def make_lab():
     teacher = User.objects.create_user("teacher", is_staff=True)
     ClassTeacher.objects.create(group=group, user=teacher)
     shows = {
-        "mine": {"value": 111, "run": runs["alice_ended"], "time": 1.0, "ended": 5.0},
-        "stale": {"value": 222, "run": runs["bob_ended"], "time": 1.0, "ended": 5.0},
-        "now": {"value": 333, "run": runs["bob_running"], "time": 2.0},
+        # Values no run number can spell (the card names runs "#111"...).
+        "mine": {"value": 0.111, "run": runs["alice_ended"], "time": 1.0, "ended": 5.0},
+        "stale": {"value": 0.222, "run": runs["bob_ended"], "time": 1.0, "ended": 5.0},
+        "now": {"value": 0.333, "run": runs["bob_running"], "time": 2.0},
     }
     return {"alice": alice, "bob": bob, "teacher": teacher}, shows
 
@@ -70,10 +71,10 @@ async def shown_to(user, shows) -> str:
 async def test_a_student_sees_a_running_run_and_their_own_never_anothers_ended_one():
     users, shows = await database_sync_to_async(make_lab)()
     card = await shown_to(users["alice"], shows)
-    assert "333" in card and "111" in card
-    assert "222" not in card  # bob's run ended: his numbers are his
+    assert "0.333" in card and "0.111" in card
+    assert "0.222" not in card  # bob's run ended: his numbers are his
     card = await shown_to(users["teacher"], shows)  # bob's teacher sees bob's runs
-    assert "222" in card and "333" in card and "111" not in card
+    assert "0.222" in card and "0.333" in card and "0.111" not in card
 
 
 def test_the_robot_page_shows_a_student_the_same(monkeypatch):
@@ -85,7 +86,7 @@ def test_the_robot_page_shows_a_student_the_same(monkeypatch):
     client.force_login(users["alice"])
     page = client.get("/robots/sim/").content.decode()
     card = page[page.index('id="shows"') :]
-    assert "333" in card and "111" in card and "222" not in card
+    assert "0.333" in card and "0.111" in card and "0.222" not in card
 
 
 async def test_a_value_leaves_a_while_after_its_run_ended(sim_agent, settings):
