@@ -4,6 +4,7 @@ import os
 from pathlib import Path
 
 import pytest
+from playwright.sync_api import Error as PlaywrightError
 from playwright.sync_api import expect, sync_playwright
 
 from tests.appliance import ROOT
@@ -62,6 +63,14 @@ def screenshot():
     SCREENSHOTS.mkdir(parents=True, exist_ok=True)
 
     def save(page, name: str) -> None:
-        page.screenshot(path=str(SCREENSHOTS / f"{name}.png"), full_page=True)
+        # Chromium now and then answers "Unable to capture screenshot" on a busy machine (its
+        # compositor had no frame ready): asked again, it has one. Anything else is raised.
+        for attempt in range(3):
+            try:
+                page.screenshot(path=str(SCREENSHOTS / f"{name}.png"), full_page=True)
+                return
+            except PlaywrightError as exc:
+                if "Unable to capture screenshot" not in str(exc) or attempt == 2:
+                    raise
 
     return save
