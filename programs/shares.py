@@ -18,30 +18,36 @@ class ShareError(ValueError):
     """A share that cannot be made: no such user or class, or no target."""
 
 
+def share_target(owner, owned: str, *, user: str = "", group: str = "", everyone: bool = False):
+    """The one target a share names (a user or a class by name, or everyone), as the fields
+    of a share row (programs' and worlds'); `owned` is the refusal of a share with `owner`."""
+    if sum([bool(user), bool(group), bool(everyone)]) != 1:
+        raise ShareError(_("share with one of: a user, a group, or everyone"))
+    if why := names.problem(user) or names.problem(group):
+        raise ShareError(why)
+    if user:
+        found = get_user_model().objects.filter(username=user).first()
+        if found is None:
+            raise ShareError(_("no user named %(name)s") % {"name": repr(user)})
+        if found == owner:
+            raise ShareError(owned)
+        return {"user": found}
+    if group:
+        found = Group.objects.filter(name=group).first()
+        if found is None:
+            raise ShareError(_("no group named %(name)s") % {"name": repr(group)})
+        return {"group": found}
+    return {"everyone": True}
+
+
 def add_share(
     program: Program, by, *, user: str = "", group: str = "", everyone: bool = False,
     can_edit: bool = False,
 ) -> Share:  # fmt: skip
     """Share with exactly one of a user (by name), a class (by name) or everyone; sharing
     again with the same target changes whether they may edit."""
-    targets = [bool(user), bool(group), bool(everyone)]
-    if sum(targets) != 1:
-        raise ShareError(_("share with one of: a user, a group, or everyone"))
-    if why := names.problem(user) or names.problem(group):
-        raise ShareError(why)
-    target = {"everyone": True}
-    if user:
-        found = get_user_model().objects.filter(username=user).first()
-        if found is None:
-            raise ShareError(_("no user named %(name)s") % {"name": repr(user)})
-        if found == program.owner:
-            raise ShareError(_("a program is always shared with its owner"))
-        target = {"user": found}
-    elif group:
-        found = Group.objects.filter(name=group).first()
-        if found is None:
-            raise ShareError(_("no group named %(name)s") % {"name": repr(group)})
-        target = {"group": found}
+    owned = _("a program is always shared with its owner")
+    target = share_target(program.owner, owned, user=user, group=group, everyone=everyone)
     share, _created = Share.objects.update_or_create(
         program=program, **target, defaults={"can_edit": can_edit, "created_by": by}
     )

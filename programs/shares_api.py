@@ -21,19 +21,19 @@ shares_router = Router(tags=["sharing"])
 groups_router = Router(tags=["groups"])
 
 
-class ShareIn(Body):
+class ShareTargetIn(Body):
+    """Whom a share is with (programs.shares.share_target): programs' and worlds'."""
+
     user: Name = ""
     group: Name = ""
     everyone: StrictBool = False
-    can_edit: StrictBool = False
 
 
-class ShareOut(Schema):
+class ShareTargetOut(Schema):
     id: int
     user: str | None = None
     group: str | None = None
     everyone: bool
-    can_edit: bool
     created: datetime
 
     @staticmethod
@@ -43,6 +43,14 @@ class ShareOut(Schema):
     @staticmethod
     def resolve_group(share):
         return share.group.name if share.group_id else None
+
+
+class ShareIn(ShareTargetIn):
+    can_edit: StrictBool = False
+
+
+class ShareOut(ShareTargetOut):
+    can_edit: bool
 
 
 class CopyIn(Body):

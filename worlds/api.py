@@ -13,11 +13,10 @@ from django.utils.translation import gettext as _
 from ninja import Field, Router, Schema
 from ninja.errors import HttpError
 from ninja.responses import Status
-from pydantic import BaseModel, ConfigDict, StrictBool, model_validator
+from pydantic import BaseModel, ConfigDict, model_validator
 
 from programs.api import Error
-from robotide.names import Name
-from robotide.schemas import Body
+from programs.shares_api import ShareTargetIn, ShareTargetOut
 from worlds import documents
 from worlds.access import OWN, get_world_for_user, worlds_for_user
 from worlds.documents import DocumentError
@@ -92,26 +91,12 @@ class Invalid(Schema):
     )
 
 
-class ShareIn(Body):
-    user: Name = ""
-    group: Name = ""
-    everyone: StrictBool = False
+class ShareIn(ShareTargetIn):
+    """A world's share: a program's without "may edit" (only the owner changes a world)."""
 
 
-class ShareOut(Schema):
-    id: int
-    user: str | None = None
-    group: str | None = None
-    everyone: bool
-    created: datetime
-
-    @staticmethod
-    def resolve_user(share):
-        return share.user.username if share.user_id else None
-
-    @staticmethod
-    def resolve_group(share):
-        return share.group.name if share.group_id else None
+class ShareOut(ShareTargetOut):
+    pass
 
 
 class RevisionOut(Schema):
