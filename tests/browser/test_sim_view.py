@@ -228,6 +228,16 @@ def test_every_thing_of_a_world_is_drawn_and_the_pose_extrapolated(new_page):
         "() => Number(document.querySelector('canvas.simview-canvas').dataset.pose"
         ".split(' ')[0]) > -0.29"
     )  # it goes on east at 0.1 m/s x 2
-    page.wait_for_timeout(600)  # past the hold (0.3 s): it stops where the speeds took it
+    # It carries on for the hold (0.3 s) and no further: wait until it has got there (a
+    # busy machine's frames come late), then it must be exactly there, not beyond.
+    page.wait_for_function(
+        "() => Number(document.querySelector('canvas.simview-canvas').dataset.pose"
+        ".split(' ')[0]) >= -0.3 + 0.1 * 2 * 0.3 - 0.002"
+    )
+    # Twenty more of the display's frames (about 0.3 s more at 60 Hz): still there.
+    page.evaluate(
+        "() => new Promise(done => { let n = 0; const tick = () => ++n >= 20 ? done()"
+        " : requestAnimationFrame(tick); requestAnimationFrame(tick); })"
+    )
     x, y, theta = drawn(page)
     assert x == pytest.approx(-0.3 + 0.1 * 2 * 0.3, abs=0.002) and y == pytest.approx(-0.6)
