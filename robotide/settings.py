@@ -97,6 +97,7 @@ INSTALLED_APPS = [
     "programs",
     "runlogs",
     "worlds",
+    "classroom",
 ]
 
 MIDDLEWARE = [
