@@ -62,6 +62,10 @@ urlpatterns = [
         name="program-unshare",
     ),
     path("worlds/", include("worlds.urls")),
+    # The classroom (issue 31): teachers' classes and exercises, students' exercises
+    path("", include("classroom.urls_classes")),
+    path("", include("classroom.urls_exercises")),
+    path("", include("classroom.urls_student")),
     path("languages/", programs.language_list, name="language-list"),
     path("help/robot-api/", api_help.robot_api_page, name="robot-api-page"),
     path("help/robot-api/<slug:language>.json", api_help.robot_api_help, name="robot-api-help"),

@@ -1,0 +1,3 @@
+"""Routes of the classroom's pages."""
+
+urlpatterns: list = []
