@@ -188,6 +188,9 @@ class Run(models.Model):
     log_pruned_reason = models.CharField(
         _("why its log was pruned"), max_length=200, blank=True, editable=False
     )
+    #: A hidden variant's run of an exercise's check (classroom.checking): its page, log and
+    #: robot are not shown to its owner, only to their teachers and staff (programs.access).
+    sealed = models.BooleanField(_("sealed"), default=False, editable=False)
 
     class Meta:
         verbose_name = _("run")

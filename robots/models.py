@@ -121,6 +121,14 @@ class Robot(models.Model):
         _("removed"), null=True, blank=True, editable=False,
         help_text=_("A personal sim removed (idle, or by its owner); kept for its runs"),
     )  # fmt: skip
+    # A check sim (robots.check_sims): a personal sim made for one variant's run of an
+    # exercise's Check, in the exercise's world at the variant's start pose; out of every list
+    # and cap of personal sims, seen by staff and the owner's teachers only (never its owner:
+    # a hidden variant's pose), removed once its run ended and its trace was saved.
+    checking = models.BooleanField(
+        _("check sim"), default=False, editable=False,
+        help_text=_("A sim made for one run of an exercise's check, removed after it"),
+    )  # fmt: skip
 
     class Meta:
         verbose_name = _("robot")
