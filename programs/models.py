@@ -1,7 +1,9 @@
+from functools import partial
 from pathlib import Path
 
 from django.conf import settings
 from django.db import models, transaction
+from django.dispatch import Signal
 from django.utils import timezone
 from django.utils.text import slugify
 from django.utils.translation import gettext, gettext_noop, pgettext_lazy
@@ -10,6 +12,19 @@ from django.utils.translation import gettext_lazy as _
 from programs.languages import get_language, language_choices
 
 MAX_SOURCE_BYTES = 512 * 1024
+
+#: A run ended (finished, failed, stopped, lost, cancelled while queued), sent once the change
+#: is committed, in whichever process marked it (the web tier, or the robot's agent: in fleet
+#: mode another process than the web server's): ``run_id``. Receivers keep no state in memory
+#: (classroom.receivers checks an attempt's run on its trace).
+run_ended = Signal()
+#: An agent took a run to start it (Run.claim): ``run_id``, sent once committed.
+run_started = Signal()
+
+
+def _send_after_commit(signal: Signal, run_ids) -> None:
+    for run_id in run_ids:
+        transaction.on_commit(partial(signal.send_robust, sender=Run, run_id=run_id))
 
 
 class Program(models.Model):
@@ -279,15 +294,19 @@ class Run(models.Model):
         return f"{slugify(self.program_name) or 'program'}-run{self.pk}.log"
 
     @classmethod
-    def create_for(cls, program: Program, robot, user, args=()) -> "Run":
+    def create_for(
+        cls, program: Program, robot, user, args=(), source: str | None = None, sealed=False
+    ) -> "Run":
+        """``source``: what runs, if not the program as saved (a checked revision's)."""
         return cls.objects.create(
             program=program,
             program_name=program.name,
             language=program.language,
-            source=program.source,
+            source=program.source if source is None else source,
             args=list(args),
             robot=robot,
             owner=user,
+            sealed=sealed,
         )
 
     def start_message(self) -> dict:
@@ -342,12 +361,15 @@ class Run(models.Model):
     def cancel_queued(cls, run_id: int, reason: str = "cancelled while queued") -> bool:
         """Stop a run that waits its turn; False if it no longer waits (it started)."""
         now = timezone.now()
-        return (
+        cancelled = (
             cls.objects.filter(pk=run_id, state=cls.State.QUEUED).update(
                 state=cls.State.STOPPED, queue_position=None, reason=reason, ended=now
             )
             == 1
         )
+        if cancelled:
+            _send_after_commit(run_ended, [run_id])
+        return cancelled
 
     @classmethod
     def move_in_queue(cls, run_id: int, rank: int) -> int | None:
@@ -375,9 +397,13 @@ class Run(models.Model):
         program's pid (the program under way), marked running in the same write."""
         waiting = cls.objects.filter(pk=run_id, state=cls.State.STARTING, pid__isnull=True)
         if running_pid is None:
-            return waiting.update(pid=0) == 1
-        running = {"state": cls.State.RUNNING, "pid": running_pid, "started": timezone.now()}
-        return waiting.update(**running) == 1
+            taken = waiting.update(pid=0) == 1
+        else:
+            running = {"state": cls.State.RUNNING, "pid": running_pid, "started": timezone.now()}
+            taken = waiting.update(**running) == 1
+        if taken:
+            _send_after_commit(run_started, [run_id])
+        return taken
 
     @classmethod
     def mark_ended(cls, run_id: int, state: str, exit_code: int | None, reason: str) -> None:
@@ -387,6 +413,12 @@ class Run(models.Model):
             state=state, exit_code=exit_code, reason=reason[:200], ended=now
         )
         cls.objects.filter(pk=run_id, started__isnull=True).update(started=now)
+        _send_after_commit(run_ended, [run_id])
+
+    @staticmethod
+    def tell_ended(run_ids) -> None:
+        """``run_ended`` for runs marked ended by an update of their own (robots.presence)."""
+        _send_after_commit(run_ended, run_ids)
 
     @classmethod
     def mark_lost(cls, robot_name: str) -> list[int]:
@@ -402,6 +434,7 @@ class Run(models.Model):
             reason="its robot agent stopped while it ran",
             ended=timezone.now(),
         )
+        _send_after_commit(run_ended, lost)
         return lost
 
 

@@ -54,6 +54,7 @@ def sweep_lost() -> list[tuple[int, str]]:
         )
         if updated:
             lost.append((run_id, robot_name))
+    Run.tell_ended([run_id for run_id, _ in lost])
     return lost
 
 
@@ -84,6 +85,7 @@ def sweep_unclaimed(seen: dict[int, float], now: float) -> list[tuple[int, str]]
         if updated:
             failed.append((run_id, robot_name))
         del seen[run_id]
+    Run.tell_ended([run_id for run_id, _ in failed])
     return failed
 
 
