@@ -36,6 +36,7 @@ from rhal.kinematics import compass_heading
 from rhal.sim_words import LANGUAGES as SIM_LANGUAGES
 from rhal.simulator.physics import Motion
 from rhal.simulator.sensors import SensorModel
+from rhal.simulator.trace import Recorder
 from rhal.simulator.world import RobotSpec, World, WorldError
 from rhal.simulator.worlds import BUILTIN, load
 
@@ -111,6 +112,15 @@ class SimRobot(Robot):
         self._opened_at = now
         self._motion = Motion(self.world, spec.radius, self.world.start_pose, now)
         self._derived_for: Pose | None = None
+        self._recorder: Recorder | None = None  # a trace being recorded (start_trace)
+        self._trace_zero: float | None = None
+
+    def _now(self) -> float:
+        """The sim's time, with a trace being recorded brought up to it first."""
+        now = self._clock()
+        if self._recorder is not None:
+            self._recorder.catch_up(now)
+        return now
 
     def _clock(self) -> float:
         """The sim's time: ``speed`` times as fast as the real clock since it was made."""
@@ -123,8 +133,11 @@ class SimRobot(Robot):
         arena or overlapping something."""
         place = self.world.start_pose if pose is None else _pose(pose)
         self._check_place(place)
-        self._motion.place(place, self._clock())
+        now = self._now()
+        self._motion.place(place, now)
         self._derived_for = None
+        if self._recorder is not None:
+            self._recorder.placed(now)
 
     def world_doc(self) -> dict[str, Any]:
         """The world it runs in, as a document."""
@@ -134,30 +147,68 @@ class SimRobot(Robot):
         """Its size and sensors (radius, range cone, sonar angles, floor sensor)."""
         return self.robot_spec.to_doc()
 
+    # -- trace (rhal.simulator.trace): what a run did, for the exercise checks -------------
+
+    def start_trace(self) -> None:
+        """Begin a fresh recording: its time 0 is now, its start the current pose."""
+        if self._recorder is not None:
+            self._recorder.stop()
+        now = self._now()
+        self._recorder = Recorder(self._motion, now, speed=self.speed)
+        self._trace_zero = now
+
+    def trace_time(self) -> float:
+        """Sim seconds since the last ``start_trace()`` (also after ``take_trace()``)."""
+        if self._trace_zero is None:
+            raise RuntimeError("no trace was started on this sim")
+        return self._now() - self._trace_zero
+
+    def take_trace(self) -> dict[str, Any]:
+        """The trace recorded up to now (rhal.simulator.trace); the recording stops."""
+        if self._recorder is None:
+            raise RuntimeError("no trace is being recorded on this sim")
+        now = self._now()
+        recorder, self._recorder = self._recorder, None
+        return recorder.finish(now)
+
+    def say(self, text: str) -> None:
+        """What a program said (the host speaks it): kept in the trace being recorded."""
+        if self._recorder is not None:
+            self._recorder.say(self._now(), text)
+
     # The pose, for code that places the robot directly (the camera tests).
     @property
     def _pose(self) -> Pose:
-        return self._motion.pose_at(self._clock())
+        return self._motion.pose_at(self._now())
 
     @_pose.setter
     def _pose(self, pose: Pose) -> None:
         speeds = self._motion.command_speeds
-        self._motion.place(pose, self._clock())
-        self._motion.command(*speeds, self._clock())
+        now = self._now()
+        self._motion.place(pose, now)
+        if self._recorder is not None:
+            self._recorder.placed(now)
+            self._recorder.command(now, *speeds)
+        self._motion.command(*speeds, now)
 
     # -- hooks -----------------------------------------------------------------------------
 
     async def _open(self) -> None:
-        now = self._clock()
+        now = self._now()
         self._opened_at = now
         self._motion.place(self.world.start_pose, now)
         self._derived_for = None
+        if self._recorder is not None:
+            self._recorder.placed(now)
 
     async def _drive(self, linear: float, angular: float) -> None:
-        self._motion.command(linear, angular, self._clock())
+        now = self._now()
+        if self._recorder is not None:
+            self._recorder.command(now, linear, angular)
+        self._motion.command(linear, angular, now)
 
     async def _read_sensors(self) -> dict[str, Any]:
-        now = self._clock()
+        now = self._now()
         pose = self._motion.pose_at(now)
         self._derive_readings(pose)
         x, y, theta = pose
@@ -215,7 +266,7 @@ class SimRobot(Robot):
         return {**super().capabilities(), "front_camera": front, "sim": sim}
 
     async def _camera_jpeg(self) -> bytes:
-        pose = self._motion.pose_at(self._clock())
+        pose = self._motion.pose_at(self._now())
         self._derive_readings(pose)
         return await asyncio.to_thread(
             _render,
@@ -230,7 +281,7 @@ class SimRobot(Robot):
     async def front_camera_jpeg(self) -> bytes:
         """What a camera on the robot's nose sees now, as JPEG bytes."""
         self._require_open()
-        pose = self._motion.pose_at(self._clock())
+        pose = self._motion.pose_at(self._now())
         return await asyncio.to_thread(_render_front, self.world, pose, self.robot_spec.radius)
 
     # -- readings --------------------------------------------------------------------------

@@ -19,6 +19,7 @@ travel, or the whole circle of an arc is clear) are jumped in one closed-form ar
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 from rhal.kinematics import advance_pose, normalize_angle
 from rhal.simulator.geometry import Edges
@@ -36,6 +37,10 @@ MAX_STEPS = 10_000  # per update (100 m in contact): a longer unread stretch is 
 
 class Motion:
     """The robot's pose over time in ``world``: ``command()`` and ``pose_at()``."""
+
+    #: Told (sim time, pose) of each step committed near something, while a trace is recorded
+    #: (rhal.simulator.trace); free stretches jumped in one arc touch nothing.
+    observer: Callable[[float, Pose], None] | None = None
 
     def __init__(self, world: World, radius: float, pose: Pose, now: float) -> None:
         self.world = world
@@ -117,6 +122,8 @@ class Motion:
             moving = (linear * fraction, angular)
             if commit:
                 self._pose, self._distance = pose, distance
+                if self.observer is not None:
+                    self.observer(now, pose)
         return pose, distance, moving
 
     def _commit_steps(self, whole: int, step: float) -> tuple[float, float]:
@@ -143,6 +150,8 @@ class Motion:
                 self._steps += 1
                 moving = (linear * fraction, angular)
                 done += 1
+                if self.observer is not None:
+                    self.observer(self._origin + self._steps * step, self._pose)
                 if fraction == 0.0 and angular == 0.0:  # pushing straight in: it stays so
                     self._steps = whole
                     return (0.0, 0.0)
