@@ -171,8 +171,9 @@ class SimRobot(Robot):
         recorder, self._recorder = self._recorder, None
         return recorder.finish(now)
 
-    def say(self, text: str) -> None:
-        """What a program said (the host speaks it): kept in the trace being recorded."""
+    def note_said(self, text: str) -> None:
+        """A text a program said (the host speaks it, robots.host_services): kept in the
+        trace being recorded."""
         if self._recorder is not None:
             self._recorder.say(self._now(), text)
 
