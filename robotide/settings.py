@@ -110,6 +110,7 @@ MIDDLEWARE = [
     "django.contrib.auth.middleware.AuthenticationMiddleware",
     "robotide.language.UserLanguageMiddleware",
     "django.contrib.messages.middleware.MessageMiddleware",
+    "classroom.middleware.OneTimePasswordMiddleware",  # a teacher's password changed first
     "django.middleware.clickjacking.XFrameOptionsMiddleware",
     "django_htmx.middleware.HtmxMiddleware",
 ]
@@ -521,6 +522,15 @@ if SIMS_PER_USER < 0 or SIMS_MAX < 0 or SIM_IDLE_MINUTES <= 0:
         "ROBOTIDE_SIMS_PER_USER and ROBOTIDE_SIMS_MAX must be 0 or more, and"
         " ROBOTIDE_SIM_IDLE_MINUTES more than 0"
     )
+# -- Checking an exercise (classroom.checking, robots.check_sims): each variant's run has a
+# fresh sim of its own, at most CHECK_SIMS_MAX of them at once on the server (a Check beyond
+# it is refused, saying to try again); of their runs, at most CHECK_RUNS_AT_ONCE go at once
+# (robots.fair_shares; default twice the CPUs: a check sim runs faster than real time and its
+# program as fast as it can), the others wait queued, their reason saying so.
+CHECK_SIMS_MAX = env_int("ROBOTIDE_CHECK_SIMS_MAX", 100)
+CHECK_RUNS_AT_ONCE = env_int("ROBOTIDE_CHECK_RUNS_AT_ONCE", 2 * (os.cpu_count() or 1))
+if CHECK_SIMS_MAX < 1 or CHECK_RUNS_AT_ONCE < 1:
+    raise ValueError("ROBOTIDE_CHECK_SIMS_MAX and ROBOTIDE_CHECK_RUNS_AT_ONCE must be 1 or more")
 # -- All runs together (runbox.share): their parent cgroup's memory (a share of the RAM or of
 # the server's own cgroup, whichever is smaller), processes, and CPU weight (the server's 100).
 RUNS_SHARE = {
