@@ -378,6 +378,14 @@
     ctx.restore();
   };
 
+  // A world drawn as here, for pages that draw it without a live robot (replay.js): a layer of
+  // the canvas' size; m: {ox, oy, scale, width, height} (CSS px, as View.mapping).
+  window.robotideSimview = {
+    drawWorld: function (canvas, ratio, world, robot, m) {
+      return View.prototype.drawWorld.call({ canvas: canvas, ratio: ratio, world: world, robot: robot }, m);
+    },
+  };
+
   // -- wiring ---------------------------------------------------------------------------------
 
   function viewOf(canvas) {
