@@ -243,7 +243,7 @@ def _checks(value, world_document: dict) -> list[dict]:
     from classroom.checks import CheckError, validate_checks
 
     try:
-        return validate_checks(value, sim_world(world_document))
+        return validate_checks(value, sim_world(world_document), _)
     except CheckError as exc:
         path = getattr(exc, "path", "") or "checks"
         if not path.startswith("checks"):

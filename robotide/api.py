@@ -11,6 +11,7 @@ from ninja import NinjaAPI
 from ninja.errors import AuthenticationError, HttpError, ValidationError
 from ninja.security import HttpBearer, django_auth
 
+from classroom.api import attempts_router, classes_router, exercises_router
 from programs.api import programs_router, runs_router
 from programs.shares_api import groups_router, shares_router
 from robotide.models import ApiToken
@@ -104,6 +105,9 @@ api.add_router("/groups", groups_router)
 api.add_router("/tokens", tokens_router)
 api.add_router("/sims", sims_router)
 api.add_router("/worlds", worlds_router)
+api.add_router("/classes", classes_router)
+api.add_router("/exercises", exercises_router)
+api.add_router("/attempts", attempts_router)
 
 
 @api.exception_handler(Http404)
