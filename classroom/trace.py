@@ -138,12 +138,12 @@ class Trace:
         return self.pose_at(self.end_time)
 
     def command_at_end(self) -> tuple[float, float]:
-        """The speeds in force when the program ended: the last command before the end (a
+        """The speeds in force when the program ended: the last command up to the end (a
         stop the agent gave once it ended is not the program's)."""
         end = self.end_time
         speeds = (0.0, 0.0)
         for t, linear, angular in self.commands:
-            if t >= end and self.end is not None:
+            if t > end:
                 break
             speeds = (linear, angular)
         return speeds
