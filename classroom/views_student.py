@@ -225,6 +225,21 @@ def hidden_variants(attempt: Attempt) -> set[int]:
     return hidden
 
 
+def _without_prefix(why: str, variant, hidden: bool) -> str:
+    """A hidden variant's why without the "hidden variant N: " it was stored with (its row is
+    named so already), as written in English or in the student's language."""
+    if not hidden or variant is None:
+        return why
+    number = {"number": int(variant) + 1}
+    for prefix in (
+        _("hidden variant %(number)s: ") % number,
+        f"hidden variant {number['number']}: ",
+    ):
+        if why.startswith(prefix):
+            return why[len(prefix) :]
+    return why
+
+
 def checklist_context(attempt: Attempt, request: HttpRequest) -> dict:
     """✔/✗ per check and variant, with why and the teacher's message where it failed."""
     exercise = attempt.exercise
@@ -239,7 +254,9 @@ def checklist_context(attempt: Attempt, request: HttpRequest) -> dict:
                 "name": variant_name(r.get("variant"), r.get("variant") in hidden),
                 "hidden": r.get("variant") in hidden,
                 "passed": bool(r.get("passed")),
-                "why": r.get("why", ""),
+                "why": _without_prefix(
+                    r.get("why", ""), r.get("variant"), r.get("variant") in hidden
+                ),
             }
             for r in sorted(mine, key=lambda r: (r.get("variant") is not None, r.get("variant")))
         ]

@@ -243,7 +243,7 @@ def test_attempt_page_checklist_without_hidden_poses_or_runs(people, attempt):
     sealed = attempt.runs.get(variant=1).run
     page = signed_in(people["alice"]).get(f"/attempts/{attempt.pk}/").content.decode()
     assert "reached kitchen at 4.0 s" in page
-    assert "hidden variant 2: touched a box at 3.5 s" in page
+    assert 'hidden start 2</span>: <span class="why">touched a box at 3.5 s' in page
     assert "Use the range sensor!" in page  # the teacher's message: the check failed
     assert "2 of 3 points" in page
     no_hidden_figures(page)
