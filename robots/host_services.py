@@ -127,7 +127,7 @@ class HostServices:
     async def _show_said(self, active, text: str) -> None:
         """The robot's page shows what it says, as the value named "said"; a sim recording
         a check run's trace keeps it there (rhal.sim, classroom.checks' output_matches)."""
-        if (note := getattr(self.agent.driver, "note_said", None)) is not None:
+        if (note := getattr(getattr(self.agent, "driver", None), "note_said", None)) is not None:
             note(text)
         with contextlib.suppress(ValueError):  # no room among the shown values: still speak
             await self.agent.api.show(active, ["said", text])
