@@ -288,21 +288,32 @@ VALIDATORS: dict[str, Callable[[Any, str, World, Translate], Any]] = {
 
 def evaluate(check: dict, trace: Trace, world: World, _: Translate = _same) -> Outcome:
     """Whether the run whose trace this is passes ``check`` (a validated one) in ``world``."""
-    kind = check.get("kind")
-    judge = JUDGES.get(kind)  # type: ignore[arg-type]
-    if judge is None:
-        if kind in STATIC_KINDS:
-            raise ValueError(f"a {kind} check judges the program's source: evaluate_static")
-        raise CheckError("kind", f"unknown kind of check {kind!r}")
-    return judge(check, trace, world, _)
+    kind = check.get("kind") if isinstance(check, dict) else None
+    if kind in STATIC_KINDS:
+        raise ValueError(f"a {kind} check judges the program's source: evaluate_static")
+    try:  # as saved, it was valid; a world changed since may have lost its zone
+        check = _validate(check, "", world, _)
+    except CheckError as exc:
+        return _unjudged(exc, _)
+    return JUDGES[check["kind"]](check, trace, world, _)
+
+
+def _unjudged(exc: CheckError, _: Translate) -> Outcome:
+    return Outcome(
+        False, _("this check cannot be judged as it is written: %(why)s") % {"why": exc.message}
+    )
 
 
 def evaluate_static(check: dict, language: str, source: str, _: Translate = _same) -> Outcome:
     """Whether a program (its language and source) passes a static check (uses_block,
     max_blocks); a program that is not a blocks program does not, and the why says so."""
-    kind = check.get("kind")
+    kind = check.get("kind") if isinstance(check, dict) else None
     if kind not in STATIC_KINDS:
         raise ValueError(f"a {kind} check judges a run's trace: evaluate")
+    try:
+        check = _validate(check, "", None, _)  # type: ignore[arg-type] # no zones in these
+    except CheckError as exc:
+        return _unjudged(exc, _)
     if language != "blocks":
         return Outcome(
             False,

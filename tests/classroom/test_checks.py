@@ -576,3 +576,15 @@ def test_a_trace_is_read_back_as_it_was_written():
     # A corner cut between two poses, neither of them inside, is a visit.
     diagonal = Trace.from_dict(hand_made(poses=[[0, 0, 0, 0], [1, 1, 1, 0]]))
     assert diagonal.first_time_in((0.5, 0.5, 0.02, 0.02)) == pytest.approx(0.49)
+
+
+async def test_a_check_the_world_no_longer_allows_fails_saying_why():
+    trace = await run(to_the_wall())
+    lost = {"kind": "reach_zone", "zone": "attic", "points": 1, "message": ""}
+    outcome = evaluate(lost, trace, WORLD)
+    assert not outcome.passed
+    assert outcome.why.startswith("this check cannot be judged as it is written: there is no zone")
+    broken = {"kind": "output_matches", "pattern": "(", "flags": ""}
+    assert not evaluate(broken, trace, WORLD).passed
+    unsaved = {"kind": "max_blocks", "count": -1}
+    assert not evaluate_static(unsaved, "blocks", source("square.json")).passed
