@@ -8,7 +8,9 @@ Who sees what:
   the teachers of a class its owner belongs to; admins (superusers);
 - to edit it: its owner, whoever a share says may edit it, admins;
 - to delete, rename or share it: its owner and admins;
-- a run: who started it, the teachers of that person's classes, admins.
+- a run: who started it, the teachers of that person's classes, admins; a *sealed* run (a
+  hidden variant's run of an exercise's check, classroom.checking): not who started it, only
+  the teachers of their classes and staff (its log, its robot's world: the hidden pose).
 """
 
 from django.core.exceptions import PermissionDenied
@@ -59,7 +61,11 @@ def runs_for_user(user) -> QuerySet:
     qs = Run.objects.select_related("robot", "owner")
     if user.is_superuser:
         return qs
-    return qs.filter(Q(owner=user) | Q(owner__groups__in=taught_groups(user))).distinct()
+    mine = Q(owner=user, sealed=False)
+    if user.is_staff:  # staff see sealed runs; their own others as before
+        mine |= Q(sealed=True)
+    taught = Q(owner__groups__in=taught_groups(user)) & ~Q(owner=user, sealed=True)
+    return qs.filter(mine | taught).distinct()
 
 
 def get_program_for_user(user, pk, level: str = READ) -> Program:
@@ -86,8 +92,9 @@ def can(user, level: str, program: Program) -> bool:
 
 def get_run_for_user(user, pk) -> Run:
     try:
-        # Who started it sees it: one plain query first, as for a program.
-        if (run := _owned(Run.objects.select_related("robot", "owner"), user, pk)) is not None:
+        # Who started it sees it (not sealed): one plain query first, as for a program.
+        runs = Run.objects.select_related("robot", "owner").filter(sealed=False)
+        if (run := _owned(runs, user, pk)) is not None:
             return run
         return runs_for_user(user).get(pk=pk)
     except (Run.DoesNotExist, ValueError, TypeError):

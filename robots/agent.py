@@ -34,7 +34,7 @@ from django.utils import timezone
 import rhal
 from programs.languages import CLIENTS_DIR, LanguageUnavailable, get_language
 from programs.models import Run
-from robots import messages, rpc, sims
+from robots import check_sims, messages, rpc, sims
 from robots.bridges import Bridges
 from robots.bus import RUNS_GROUP, run_group
 from robots.camera import CameraHub
@@ -100,6 +100,9 @@ class ActiveRun:
     # Its claim (Run.claim): True once it is this agent's to run. The program starts while
     # it is asked; nothing of the robot is its until the answer is yes.
     claimed: asyncio.Future | None = field(default=None, repr=False)
+    # A check sim's run: its trace, recorded from its start pose (robots.check_sims).
+    trace: "check_sims.TraceRecorder | None" = field(default=None, repr=False)
+    limit: asyncio.Task | None = field(default=None, repr=False)  # its time limit's watch
 
     def confirmed_now(self) -> bool:
         """Its claim has been answered yes."""
@@ -253,6 +256,9 @@ class RobotAgent:
         robot = await database_sync_to_async(Robot.objects.get)(name=self.name)
         self.limits = robot.run_limits(settings.RUN_DEFAULTS)
         self.start_each_run = robot.settings.get("start_each_run") is True  # robots.start_pose
+        # A check sim (robots.check_sims): one run, its trace recorded, then it is removed.
+        self.checking = robot.checking
+        self.check_time_limit = check_sims.time_limit_of(robot.settings)
         # Off the event loop: the first look may start a process and compile the seccomp filter.
         self.isolation, self.isolation_error = await asyncio.to_thread(resolve_isolation, robot)
         if self.isolation is not None:  # runs' cgroups inside this robotide's parent, if any
@@ -551,7 +557,26 @@ class RobotAgent:
         if self.lease.estopped:  # pressed while its start was decided (its share's admission)
             return "stopped", "emergency stop"
         await self.starts.before_run(run_id)  # at the start pose, if it is to start there
+        if active is not None and active.trace is not None:  # its trace begins there
+            active.trace.start()
+            limit = self._time_limit(active)
+            active.limit = asyncio.create_task(limit, name=f"run-{run_id}-limit")
         return None
+
+    async def _time_limit(self, active: ActiveRun) -> None:
+        """A check run is stopped when its sim time is up, its trace ending there."""
+        speed = max(float(getattr(self.driver, "speed", 1.0) or 1.0), 0.01)
+        while active.run_id in self.runs:
+            left = active.trace.left()
+            if left is None:
+                return
+            if left <= 0:
+                active.trace.time_limit = True
+                active.trace.take()
+                reason = check_sims.TIME_LIMIT_REASON % active.trace.time_limit_s
+                self.stop_run(active.run_id, reason)
+                return
+            await asyncio.sleep(min(left / speed, 1.0))
 
     async def _launch(self, run_id: int, message: dict, claimed=None, gate=None) -> ActiveRun:
         if (why := messages.check_filename(message["filename"])) is not None:
@@ -600,6 +625,10 @@ class RobotAgent:
         )  # fmt: skip
         # The token is good before the program starts: it may call auth at once.
         active = ActiveRun(run_id, token, process, user=message.get("user", ""), claimed=claimed)
+        on_output = partial(self._publish_output, run_id)
+        if self.checking and check_sims.TraceRecorder.possible(self.driver):
+            active.trace = check_sims.TraceRecorder(self.driver, self.check_time_limit)
+            on_output = partial(self._check_output, active.trace, on_output)
         self.runs[run_id] = active
         self.tokens[token] = active
         for served in process.box.served:
@@ -607,8 +636,7 @@ class RobotAgent:
                 served.belongs_to(run_id, active.user)
         try:
             await process.begin(
-                launch, gate, log_path=Run.log_path_of(run_id),
-                on_output=partial(self._publish_output, run_id),
+                launch, gate, log_path=Run.log_path_of(run_id), on_output=on_output,
             )  # fmt: skip
         except BaseException:
             self.runs.pop(run_id, None)
@@ -686,8 +714,15 @@ class RobotAgent:
             return Listener(service, self.gateway.serve_run)
         return Listener(service, partial(relay_to_host, service))
 
+    @staticmethod
+    def _check_output(trace, publish, lines: list, skipped: int, skipped_from: int) -> None:
+        trace.lines(lines, skipped)
+        publish(lines, skipped, skipped_from)
+
     async def _watch(self, active: ActiveRun) -> None:
         outcome = await active.process.wait()
+        if active.trace is not None:  # where the program left the robot, before it is stopped
+            active.trace.take()
         # The token dies with the run, before anything else can use it, and so do the
         # connections it signed in (another program may hold them), with what they hold.
         self.tokens.pop(active.token, None)
@@ -701,14 +736,38 @@ class RobotAgent:
         # After its claim (a program may end before the answer): marked running, then ended.
         await active.confirmed()
         if outcome.state != NOT_OURS and not active.disowned():  # else its state stays
+            if active.trace is not None:  # saved before the run is marked ended: its check
+                await self._save_trace(active, outcome)  # reads it (classroom.checking)
             await self._end_run(active.run_id, outcome.state, outcome.exit_code, outcome.reason)
-        if not self.runs:  # the robot's next run finds its box made
+        if not self.runs and not self.checking:  # the robot's next run finds its box made
             self._box_ahead(now=True)
+
+    async def _save_trace(self, active: ActiveRun, outcome) -> None:
+        doc = active.trace.document(outcome.state, outcome.exit_code, outcome.reason)
+        if doc is None:  # its program never started: no trace (its check says why)
+            return
+        try:
+            await asyncio.to_thread(
+                check_sims.save_trace, Run.log_path_of(active.run_id).parent, doc
+            )
+        except OSError:
+            log.exception("agent %s: run %s's trace not saved", self.name, active.run_id)
 
     async def _end_run(self, run_id, state, exit_code, reason) -> None:
         await database_sync_to_async(Run.mark_ended)(run_id, state, exit_code, reason)
         self._run_changed(run_id)
         self.queue.ended(run_id)  # its share is free: runs waiting for one may start
+        if self.checking:
+            await self._check_sim_done()
+
+    async def _check_sim_done(self) -> None:
+        """A check sim's run ended (its trace saved): the sim is removed, this agent stops."""
+        try:
+            if await database_sync_to_async(check_sims.remove_after_run)(self.name):
+                self._shutting_down = True  # no box made ahead: no run will come
+                await sims.tell_removed_async(self.name)
+        except Exception:  # the reaper removes it (robots.sims.check_sims_done)
+            log.exception("agent %s: the check sim could not be removed", self.name)
 
     def stop_run(self, run_id: int, reason: str) -> bool:
         """Stop: SIGTERM, then SIGKILL after the grace. The program may clean up meanwhile,

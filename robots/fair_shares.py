@@ -3,15 +3,19 @@
 A user has at most ``RUNS_PER_USER`` runs going on all robots together (staff:
 ``RUNS_PER_STAFF``; 0: no limit), and a robot runs at most its ``settings.runs_at_once``
 programs, whoever's, and never more than its agent's isolation allows at once (a rootless box
-without a run-wide cgroup: one). A run beyond a limit waits ``queued`` in its robot's queue
-(robots.run_queue) with the reason in its ``reason``, shown on its page, the robot's page and
-in the API; when a run ends, the agents holding runs that waited for it look again.
+without a run-wide cgroup: one). The runs of exercises' checks (runs on check sims,
+robots.check_sims) go at most ``CHECK_RUNS_AT_ONCE`` at once on the whole server, whoever's.
+A run beyond a limit waits ``queued`` in its robot's queue (robots.run_queue) with the reason
+in its ``reason``, shown on its page, the robot's page and in the API; when a run ends, the
+agents holding runs that waited for it look again.
 
 The decision is the database's, so that it holds with several agents (fleet mode: one process
 a robot) and web workers at once: a run is *admitted* in one transaction that locks its
 owner's row (and its robot's, for the robot's limit), counts what is going, and marks the run
 admitted (``started`` set) before the lock is let go; two agents cannot both start a user's
-third run. SQLite serialises such transactions anyway (IMMEDIATE).
+third run. A check run's admission locks every live check sim's row too (in the order of their
+ids, before its own robot's), so that the server-wide count holds. SQLite serialises such
+transactions anyway (IMMEDIATE).
 """
 
 from __future__ import annotations
@@ -125,6 +129,10 @@ def admit(run_id: int, box_cap: int | None = None) -> Decision:
         # admissions): each locked alone, not the run's row with it.
         users = get_user_model().objects.select_for_update(of=("self",))
         owner = users.filter(runs__pk=run_id).first()
+        checking = Robot.objects.filter(runs__pk=run_id, checking=True).exists()
+        if checking:  # the server's count of check runs: every check sim's row, in order
+            lock = Robot.objects.select_for_update(of=("self",)).filter(checking=True)
+            list(lock.filter(reaped__isnull=True).order_by("pk").values_list("pk", flat=True))
         robot = Robot.objects.select_for_update(of=("self",)).filter(runs__pk=run_id).first()
         run = Run.objects.filter(pk=run_id).first()  # as it is now, under the locks
         if owner is None or robot is None or run is None:
@@ -135,6 +143,8 @@ def admit(run_id: int, box_cap: int | None = None) -> Decision:
         if not queued and run.started is not None:
             return Decision(Admission.ADMITTED)  # admitted already: its claim decides the rest
         reason = _over_limit(run, user_limit(owner), robot_limit(robot, box_cap))
+        if reason is None and checking:
+            reason = _over_check_limit(run)
         if reason is None:
             return Decision(_admitted(run, queued))
         if queued:
@@ -163,6 +173,13 @@ def _over_limit(run: Run, per_user: int | None, per_robot: int | None) -> str | 
     return None
 
 
+def _over_check_limit(run: Run) -> str | None:
+    """Why check run ``run`` may not start now (the server's CHECK_RUNS_AT_ONCE), or None."""
+    limit = settings.CHECK_RUNS_AT_ONCE
+    going_now = Run.objects.filter(going(), robot__checking=True).exclude(pk=run.pk).count()
+    return check_reason(limit) if going_now >= limit else None
+
+
 def _admitted(run: Run, queued: bool) -> Admission:
     now = timezone.now()
     if queued:  # Run.unqueue's step, admitted in the same write
@@ -174,6 +191,14 @@ def _admitted(run: Run, queued: bool) -> Admission:
             pk=run.pk, state=Run.State.STARTING, pid__isnull=True, started__isnull=True
         ).update(started=now)
     return Admission.ADMITTED if changed else Admission.GONE
+
+
+CHECKS_FULL = f"{WAITING}the server runs at most "
+
+
+def check_reason(limit: int) -> str:
+    runs = "check run" if limit == 1 else "check runs"
+    return f"{CHECKS_FULL}{limit} {runs} at once"
 
 
 def reason_shown(reason: str, mine: bool) -> str:
@@ -201,24 +226,39 @@ def reason_shown(reason: str, mine: bool) -> str:
             "waiting: the robot runs at most %(limit)s programs at once",
             limit,
         ) % {"limit": limit}
+    if found := _CHECKS_FULL_STORED.fullmatch(reason):
+        limit = int(found[1])
+        return ngettext(
+            "waiting: the server checks at most %(limit)s run at once, everyone's",
+            "waiting: the server checks at most %(limit)s runs at once, everyone's",
+            limit,
+        ) % {"limit": limit}
     return reason
 
 
 # What user_reason and robot_reason store, read back by reason_shown.
 _USER_WAIT_STORED = re.compile(re.escape(USER_WAIT) + r" (\d+) runs? going \(your limit is (\d+)\)")
 _ROBOT_FULL_STORED = re.compile(re.escape(ROBOT_FULL) + r"(\d+) programs? at once")
+_CHECKS_FULL_STORED = re.compile(re.escape(CHECKS_FULL) + r"(\d+) check runs? at once")
 
 
 def robots_to_look_again(run_id: int) -> list[str]:
     """A run ended: the robots other than its own whose queues hold runs of its owner waiting
     for a share (their agents look again; its own agent does anyway)."""
-    ids = Run.objects.filter(pk=run_id).values_list("owner_id", "robot_id").first()
+    ids = Run.objects.filter(pk=run_id).values_list("owner_id", "robot_id", "robot__checking")
+    ids = ids.first()
     if ids is None:
         return []
     waiting = Run.objects.filter(
         owner_id=ids[0], state=Run.State.QUEUED, reason__startswith=WAITING
     ).exclude(robot_id=ids[1])
-    return sorted(set(waiting.values_list("robot__name", flat=True)))
+    robots = set(waiting.values_list("robot__name", flat=True))
+    if ids[2]:  # a check run: the first check runs waiting for the server's count (the others
+        # look again within run_queue.SHARES_LOOK; told all, every agent would ask at once)
+        checks = Run.objects.filter(state=Run.State.QUEUED, reason__startswith=CHECKS_FULL)
+        first = checks.order_by("pk").values_list("robot__name", flat=True)
+        robots.update(first[: settings.CHECK_RUNS_AT_ONCE])
+    return sorted(robots)
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from robots.isolation_words import isolation_shown
 # Settings for the runs on a robot; anything else in its `settings` goes to its driver.
 RUN_SETTINGS = (
     "limits", "isolation", "network", "tmp_mb", "loopback_ports", "allow_networks", "camera",
-    "speech", "queue_turn_seconds", "runs_at_once", "start_each_run",
+    "speech", "queue_turn_seconds", "runs_at_once", "start_each_run", "check",
 )  # fmt: skip
 
 
@@ -158,7 +158,9 @@ class Robot(models.Model):
         return age < django_settings.AGENT_OFFLINE_AFTER
 
     def configurable_by(self, user) -> bool:
-        return user.is_staff or (self.owner_id is not None and self.owner_id == user.pk)
+        """Staff, and who looks after it (not a check sim's owner: it is not theirs to see)."""
+        owner = self.owner_id is not None and self.owner_id == user.pk and not self.checking
+        return user.is_staff or owner
 
     def drivable_by(self, user) -> bool:
         """Run programs on it and drive it by hand (seeing it is checked apart)."""
@@ -440,10 +442,12 @@ def robots_for_user(user, reaped: bool = False):
     """The robots ``user`` may use: those of no class in particular, those of their classes
     (as a member or a teacher), those they own, and all of them for admins. Personal sims:
     to their owners, staff and the teachers of their owners' classes only. Removed sims
-    (``reaped``) are left out unless asked for."""
+    (``reaped``) are left out unless asked for; check sims always (get_robot_for_user finds
+    one for those who may see it)."""
     if not user.is_authenticated:
         return Robot.objects.none()
-    robots = Robot.objects.all() if reaped else Robot.objects.filter(reaped__isnull=True)
+    robots = Robot.objects.filter(checking=False)
+    robots = robots if reaped else robots.filter(reaped__isnull=True)
     if user.is_superuser:
         return robots
     Q = models.Q
@@ -458,11 +462,27 @@ def robots_for_user(user, reaped: bool = False):
     return robots.filter(seen).distinct()
 
 
+def check_sims_for_user(user):
+    """The check sims (robots.check_sims) ``user`` may see: staff's, and those of the students
+    of the classes they teach; never their owner's (a hidden variant's world and pose)."""
+    sims = Robot.objects.filter(checking=True)
+    if not user.is_authenticated:
+        return sims.none()
+    if user.is_staff or user.is_superuser:
+        return sims
+    return sims.filter(owner__groups__teachers__user=user).exclude(owner=user).distinct()
+
+
 def get_robot_for_user(user, name: str) -> Robot:
     try:
         if names.problem(name):  # none is named so, and PostgreSQL cannot look for NUL
             raise Robot.DoesNotExist
-        return robots_for_user(user).get(name=name)
+        found = robots_for_user(user).filter(name=name).first()
+        if found is None:  # out of every list: found by name by whoever may see it
+            found = check_sims_for_user(user).filter(name=name, reaped__isnull=True).first()
+        if found is None:
+            raise Robot.DoesNotExist
+        return found
     except Robot.DoesNotExist:
         removed = robots_for_user(user, reaped=True).filter(name=name, reaped__isnull=False)
         if not names.problem(name) and removed.exists():

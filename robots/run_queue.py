@@ -472,7 +472,8 @@ def runs_to_see(user):
     runs = runs_for_user(user)
     if not user.is_authenticated or user.is_superuser:
         return runs
-    managed = Robot.objects.all() if user.is_staff else Robot.objects.filter(owner=user)
+    mine = Robot.objects.filter(owner=user, checking=False)  # a check sim is not its owner's
+    managed = Robot.objects.all() if user.is_staff else mine
     waiting = Q(state=Run.State.QUEUED, robot__in=managed)
     return Run.objects.select_related("robot", "owner").filter(
         Q(pk__in=runs.values("pk")) | waiting

@@ -34,7 +34,7 @@ from datetime import timedelta
 from django.conf import settings
 from django.contrib.auth import get_user_model
 from django.core.exceptions import PermissionDenied
-from django.db import IntegrityError, transaction
+from django.db import IntegrityError, models, transaction
 from django.db.models import Max, ProtectedError, Q
 from django.http import Http404
 from django.utils import timezone
@@ -75,10 +75,10 @@ class UnknownWorld(ValueError):
 
 
 def sims_of(user):
-    """``user``'s own personal sims, not removed."""
+    """``user``'s own personal sims, not removed (nor their check sims: robots.check_sims)."""
     if not user.is_authenticated:
         return Robot.objects.none()
-    return Robot.objects.filter(personal=True, owner=user, reaped__isnull=True)
+    return Robot.objects.filter(personal=True, checking=False, owner=user, reaped__isnull=True)
 
 
 def offered(user) -> bool:
@@ -106,7 +106,7 @@ def _check_caps(user) -> None:
             )
             % {"count": mine, "limit": settings.SIMS_PER_USER}
         )
-    everyone = Robot.objects.filter(personal=True, reaped__isnull=True).count()
+    everyone = Robot.objects.filter(personal=True, checking=False, reaped__isnull=True).count()
     if everyone >= settings.SIMS_MAX:
         raise SimRefused(
             _(
@@ -329,7 +329,7 @@ def idle_sims(now=None) -> list[Robot]:
     candidates = Robot.objects.filter(personal=True, reaped__isnull=True).filter(
         Q(used__lt=cutoff) | Q(used__isnull=True, created__lt=cutoff)
     )
-    idle = []
+    idle = [robot for robot in check_sims_done() if robot not in candidates]
     for robot in candidates:
         runs = Run.objects.filter(robot=robot)
         if runs.filter(state__in=Run.ONGOING).exists():
@@ -339,6 +339,14 @@ def idle_sims(now=None) -> list[Robot]:
             continue
         idle.append(robot)
     return idle
+
+
+def check_sims_done() -> list[Robot]:
+    """Check sims whose run ended without their agent removing them (the run failed before
+    an agent took it, or its agent went away): removed at the reaper's next look."""
+    done = Robot.objects.filter(checking=True, reaped__isnull=True, runs__isnull=False)
+    going = Run.objects.filter(robot=models.OuterRef("pk"), state__in=Run.ONGOING)
+    return list(done.exclude(models.Exists(going)).distinct())
 
 
 def reap_idle(now=None) -> list[str]:
@@ -352,6 +360,11 @@ def tell_removed(name: str) -> None:
         blocking(_tell_removed)(name)
     except Exception:  # the channel layer away: the agent stops with the next manager start
         log.exception("personal sim %s: could not tell the agents it was removed", name)
+
+
+async def tell_removed_async(name: str) -> None:
+    """``tell_removed`` from the loop (a check sim's agent, robots.check_sims)."""
+    await _tell_removed(name)
 
 
 async def _tell_removed(name: str) -> None:

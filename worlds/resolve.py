@@ -3,6 +3,7 @@
 A ``sim://`` robot names its world in its settings (``"world": ...``) or its URL
 (``sim://?world=...``; the settings win, as rhal.connect merges them). The value is:
 - a built-in world's name (``maze``, also ``builtin:maze``): passed to the driver as it is;
+- a world document itself (a dict: a check sim's, the exercise's world as saved with it);
 - a stored world's id (``12``) or name (``my-maze``): the driver gets its document
   (``world=<dict>``), the one saved last. By name, the robot owner's own world of that name,
   else the only one of that name they may see.
@@ -95,6 +96,8 @@ def world_option(robot) -> dict:
     value = world_setting(robot)
     if value is None:
         return options
+    if isinstance(value, dict):  # a document itself (a check sim's: robots.check_sims)
+        return {**options, "world": value}
     found = find_world(value, robot.owner)
     options["world"] = found if isinstance(found, str) else found.document
     return options
@@ -121,6 +124,8 @@ def options_to_check(robot) -> dict:
         return options
     if (name := builtin_name(value)) is not None:
         return {**options, "world": name}
+    if isinstance(value, dict):
+        return {**options, "world": value}
     if isinstance(value, int) or (isinstance(value, str) and value.isdigit()):
         found = World.objects.filter(pk=int(value)).first()
     else:

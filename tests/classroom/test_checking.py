@@ -1,0 +1,353 @@
+"""Checking an exercise (classroom.checking, robots.check_sims): a student's Check runs the
+program's revision once per variant, each on a fresh check sim with a real agent (embedded
+mode's AgentManager, as the web process runs them), each run boxed and logged; the runs'
+traces are judged and the attempt is DONE with a row a check and variant. A hidden variant's
+run is sealed (its page and log 404 to its student, 200 to the teacher); the check sims are
+gone once their runs ended; refusals say why; the server's check-run cap queues runs, saying
+so; 25 students' Checks at once all complete.
+
+On the code before this issue there is no classroom.checking, no check sims and no sealed
+runs: the tests of them cannot run there (ImportError), see the report."""
+
+import asyncio
+import json
+import math
+
+import pytest
+from asgiref.sync import sync_to_async
+from channels.layers import get_channel_layer
+from django.contrib.auth.models import Group, User
+from django.test import Client
+
+from classroom import checking
+from classroom.models import Attempt, AttemptRun, Exercise
+from programs.models import Program, Run
+from robotide.models import ClassTeacher
+from robots import fair_shares
+from robots.models import Robot
+from tests.waiting import until
+from worlds.documents import builtin_worlds
+
+NORTH = math.pi / 2
+# Boxes' kitchen: x -1..0, y 1.4..2.0 (the north wall at 2.0). Each variant faces north below
+# it; a hidden one starts further south, where driving a fixed time falls short.
+VARIANTS = [
+    {"x": -0.5, "y": 0.0, "theta": NORTH, "hidden": False},
+    {"x": -0.25, "y": -0.05, "theta": NORTH, "hidden": False},
+    {"x": -0.6, "y": -0.6, "theta": NORTH, "hidden": True},
+]
+CHECKS = [
+    {"kind": "reach_zone", "zone": "kitchen", "points": 2, "message": "Get to the kitchen"},
+    {"kind": "no_contact", "points": 1, "message": "Do not touch anything"},
+]
+# Reads its range sensor: stops before the north wall, inside the kitchen, from anywhere (0.5 m
+# from the wall, 0.35 m before its body would touch it: a second of sim time to see it in).
+PASSES = """\
+import time
+import robot
+bot = robot.Robot()
+bot.drive(0.3, 0.0)
+while bot.sensors()["range"] > 0.5:
+    time.sleep(0.02)
+bot.stop()
+print("stopped before the wall", flush=True)
+"""
+# Drives a fixed time: right from the visible variants, short of the kitchen from the hidden.
+FIXED_TIME = """\
+import time
+import robot
+bot = robot.Robot()
+bot.drive(0.3, 0.0)
+time.sleep(5.5)
+bot.stop()
+"""
+# Waits until the test lets it end (a file in its home): how long it runs is the test's.
+HOLDS = """\
+import os, time
+print('going', flush=True)
+while not os.path.exists(os.path.expanduser('~/done')):
+    time.sleep(0.05)
+"""
+DONE = Attempt.State.DONE
+
+
+def make_class(students: int | list[str] = ("ana", "ben")):
+    """A class taught by tess, its students, and an exercise on the boxes world."""
+    group = Group.objects.create(name="class-7a")
+    tess = User.objects.create_user("tess")
+    ClassTeacher.objects.create(group=group, user=tess)
+    names = [f"s{i:02}" for i in range(students)] if isinstance(students, int) else students
+    people = [User.objects.create_user(name) for name in names]
+    for person in people:
+        person.groups.add(group)
+    return tess, people, group
+
+
+def make_exercise(tess, group, **fields) -> Exercise:
+    defaults = {
+        "owner": tess, "group": group, "title": "Reach the kitchen without touching anything",
+        "world": "boxes", "world_document": builtin_worlds()["boxes"], "languages": [],
+        "variants": VARIANTS, "checks": CHECKS, "speed": 10.0, "time_limit_s": 30.0,
+    }  # fmt: skip
+    return Exercise.objects.create(**{**defaults, **fields})
+
+
+def program(user, source: str, language: str = "python", name: str = "kitchen") -> Program:
+    made = Program.objects.create(owner=user, name=name, language=language)
+    made.save_source(source, user)
+    return made
+
+
+def signed_in(user) -> Client:
+    client = Client()
+    client.force_login(user)
+    return client
+
+
+async def done(attempt: Attempt, timeout: float = 180.0) -> Attempt:
+    async def finished():
+        await sync_to_async(attempt.refresh_from_db)()
+        return attempt.state in (DONE, Attempt.State.ERROR)
+
+    await until(finished, timeout=timeout)
+    assert attempt.state == DONE, (attempt.state, attempt.error)
+    return attempt
+
+
+def live_check_sims() -> int:
+    return Robot.objects.filter(checking=True, reaped__isnull=True).count()
+
+
+@pytest.fixture
+async def agents():
+    """Embedded mode's agents: one per robot, the check sims' started as they are made."""
+    from robots.agent import AgentManager
+
+    await get_channel_layer().flush()
+    manager = AgentManager()
+    await manager.start()
+    yield manager
+    await manager.shutdown()
+
+
+def by_check_and_variant(attempt: Attempt) -> dict:
+    return {(row["check"], row["variant"]): row for row in attempt.results}
+
+
+# -- a Check, its runs, its results ---------------------------------------------------------------
+
+
+@pytest.mark.django_db(transaction=True)
+async def test_a_check_runs_every_variant_and_judges_its_trace(agents):
+    tess, (ana, ben), group = await sync_to_async(make_class)()
+    # Twice real time: a program that reads its sensors to stop in time has room for a busy
+    # machine's latency (at 10x, 50 ms of it is 15 cm).
+    exercise = await sync_to_async(make_exercise)(tess, group, speed=2.0)
+    good = await sync_to_async(program)(ana, PASSES)
+    fixed = await sync_to_async(program)(ben, FIXED_TIME)
+    start = sync_to_async(checking.start_attempt)
+    attempts = [await start(exercise, good, ana), await start(exercise, fixed, ben)]
+    assert [a.state for a in attempts] == ["queued", "queued"]
+    passed, failed = [await done(attempt) for attempt in attempts]
+
+    # Ana's reads its range sensor: every check in every variant.
+    assert passed.passed and passed.score == passed.max_score == 3.0, passed.results
+    assert len(passed.results) == 6 and all(row["passed"] for row in passed.results)
+    assert passed.number == 1 and passed.revision_number == 1 and not passed.late
+    # Ben's drives 5.5 s: the kitchen from the visible variants, not from the hidden one;
+    # it touches nothing anywhere. The hidden one's why says so without its pose.
+    rows = by_check_and_variant(failed)
+    assert not failed.passed and failed.score == 1.0, json.dumps(failed.results, indent=1)
+    assert rows[(0, 0)]["passed"] and rows[(0, 1)]["passed"], failed.results
+    hidden = rows[(0, 2)]
+    assert not hidden["passed"] and hidden["why"].startswith("hidden variant 3: "), hidden
+    assert "-0.6" not in hidden["why"] and "kitchen" in hidden["why"], hidden
+    assert all(rows[(1, j)]["passed"] for j in range(3)), failed.results
+    assert [row["points"] for row in failed.results] == [2.0] * 3 + [1.0] * 3
+
+    # Each run was boxed and logged as any run, on a check sim of its own, now removed.
+    runs = await sync_to_async(
+        lambda: list(AttemptRun.objects.filter(attempt=failed).select_related("run__robot"))
+    )()
+    assert [ar.run.sealed for ar in runs] == [False, False, True]
+    assert len({ar.run.robot.name for ar in runs}) == 3
+    assert all(ar.run.robot.checking and ar.run.owner_id == ben.pk for ar in runs)
+    assert all(ar.run.state == "finished" and ar.run.source == FIXED_TIME for ar in runs)
+    trace = json.loads((runs[2].run.directory / "trace.json").read_text())
+    assert trace["end"]["state"] == "finished" and not trace["end"]["time_limit"], trace["end"]
+    assert trace["start"]["y"] == pytest.approx(-0.6) and trace["speed"] == 2.0
+    await until(sync_to_async(lambda: live_check_sims() == 0), timeout=60)
+    await until(lambda: not any(name.startswith("check-") for name in agents.agents), timeout=60)
+
+    # The hidden variant's run: not to Ben (page, log, API, its robot), to his teacher yes.
+    sealed, shown = runs[2].run, runs[0].run
+    student, teacher = await sync_to_async(signed_in)(ben), await sync_to_async(signed_in)(tess)
+    for path in (f"/runs/{sealed.pk}/", f"/runs/{sealed.pk}/log", f"/api/runs/{sealed.pk}"):
+        got = await sync_to_async(student.get)(path)
+        assert got.status_code == 404, (path, got.status_code)
+        assert (await sync_to_async(teacher.get)(path)).status_code == 200, path
+    assert (await sync_to_async(student.get)(f"/runs/{shown.pk}/")).status_code == 200
+    robot_page = f"/robots/{sealed.robot.name}/"
+    assert (await sync_to_async(student.get)(robot_page)).status_code == 404
+    listed = (await sync_to_async(student.get)("/runs/")).content.decode()
+    assert f"/runs/{sealed.pk}/" not in listed and f"/runs/{shown.pk}/" in listed
+
+
+@pytest.mark.django_db(transaction=True)
+async def test_a_program_stopped_at_the_time_limit_fails_ends_within(agents):
+    """The agent stops a check run when its sim time is up: the trace ends there, says so."""
+    tess, (ana,), group = await sync_to_async(make_class)(["ana"])
+    exercise = await sync_to_async(make_exercise)(
+        tess, group, variants=VARIANTS[:1], time_limit_s=5.0,
+        checks=[{"kind": "ends_within", "seconds": 5, "points": 1, "message": ""}],
+    )  # fmt: skip
+    spins = await sync_to_async(program)(ana, "import time\nwhile True:\n    time.sleep(0.1)\n")
+    attempt = await done(await sync_to_async(checking.start_attempt)(exercise, spins, ana))
+    (row,) = attempt.results
+    assert not row["passed"] and row["why"], row
+    run = await sync_to_async(lambda: attempt.runs.get().run)()
+    trace = json.loads((run.directory / "trace.json").read_text())
+    assert trace["end"]["time_limit"] and trace["end"]["state"] == "stopped", trace["end"]
+    assert 5.0 <= trace["end"]["t"] < 8.0, trace["end"]
+    assert run.reason.startswith("time limit reached: 5 s of sim time"), run.reason
+
+
+# -- refusals ----------------------------------------------------------------------------------
+
+
+@pytest.mark.django_db
+def test_a_blocks_only_exercise_refuses_a_python_program():
+    tess, (ana,), group = make_class(["ana"])
+    exercise = make_exercise(tess, group, languages=["blocks"])
+    with pytest.raises(checking.CheckRefused) as refused:
+        checking.start_attempt(exercise, program(ana, PASSES), ana)
+    assert refused.value.status == 422
+    assert refused.value.message == "this exercise takes blocks programs only"
+    assert not Attempt.objects.exists() and not Robot.objects.filter(checking=True).exists()
+
+
+@pytest.mark.django_db
+def test_a_second_check_while_one_is_going_is_refused_and_others_programs_too():
+    tess, (ana, ben), group = make_class()
+    exercise = make_exercise(tess, group)
+    first = checking.start_attempt(exercise, program(ana, PASSES), ana)
+    assert first.state == "queued" and first.runs.count() == 3
+    other = make_exercise(tess, group, title="Another")
+    with pytest.raises(checking.CheckRefused) as refused:
+        checking.start_attempt(other, program(ana, PASSES, name="other"), ana)
+    assert refused.value.status == 409 and "still going" in refused.value.message
+    with pytest.raises(checking.CheckRefused) as refused:
+        checking.start_attempt(exercise, Program.objects.get(owner=ana, name="kitchen"), ben)
+    assert refused.value.status == 403
+    assert Attempt.objects.count() == 1
+
+
+@pytest.mark.django_db
+def test_the_check_sims_cap_refuses_with_a_clear_message(settings):
+    settings.CHECK_SIMS_MAX = 4
+    tess, (ana, ben), group = make_class()
+    exercise = make_exercise(tess, group)
+    checking.start_attempt(exercise, program(ana, PASSES), ana)  # 3 sims
+    with pytest.raises(checking.CheckRefused) as refused:
+        checking.start_attempt(exercise, program(ben, PASSES), ben)
+    assert refused.value.status == 429 and "try again" in refused.value.message
+    assert live_check_sims() == 3 and Attempt.objects.filter(student=ben).count() == 0
+
+
+@pytest.mark.django_db
+def test_check_sims_are_in_no_list_nor_cap_and_only_teachers_see_them(settings):
+    from robots import sims
+    from robots.models import get_robot_for_user, robots_for_user
+
+    settings.SIMS_PER_USER, settings.SIMS_MAX = 1, 1
+    tess, (ana, ben), group = make_class()
+    staff = User.objects.create_user("staff", is_staff=True)
+    checking.start_attempt(make_exercise(tess, group), program(ana, PASSES), ana)
+    name = Robot.objects.filter(checking=True).first().name
+    assert not sims.sims_of(ana).exists()
+    for who in (ana, tess, staff):
+        assert name not in robots_for_user(who).values_list("name", flat=True)
+    for who in (tess, staff):
+        assert get_robot_for_user(who, name).checking
+    from django.http import Http404
+
+    for who in (ana, ben):
+        with pytest.raises(Http404):
+            get_robot_for_user(who, name)
+    assert sims.create(ana).personal  # her own sim still fits under both caps
+
+
+# -- the server's cap of check runs ---------------------------------------------------------------
+
+
+@pytest.mark.django_db(transaction=True)
+async def test_check_runs_beyond_the_servers_cap_wait_queued_saying_why(agents, settings):
+    settings.CHECK_RUNS_AT_ONCE = 1
+    tess, (ana,), group = await sync_to_async(make_class)(["ana"])
+    exercise = await sync_to_async(make_exercise)(tess, group, checks=CHECKS[1:])
+    holds = await sync_to_async(program)(ana, HOLDS)
+    attempt = await sync_to_async(checking.start_attempt)(exercise, holds, ana)
+    runs = await sync_to_async(lambda: [ar.run for ar in attempt.runs.select_related("run")])()
+
+    async def states():
+        fresh = await sync_to_async(
+            lambda: list(Run.objects.filter(attempt_runs__attempt=attempt))
+        )()
+        return sorted(run.state for run in fresh), fresh
+
+    await until(lambda: _states_are(states, ["queued", "queued", "running"]), timeout=120)
+    _, fresh = await states()
+    waiting = [run for run in fresh if run.state == "queued"]
+    for run in waiting:
+        assert run.reason == "waiting: the server runs at most 1 check run at once", run.reason
+        assert fair_shares.reason_shown(run.reason, mine=True) == (
+            "waiting: the server checks at most 1 run at once, everyone's"
+        )
+    await sync_to_async(attempt.refresh_from_db)()
+    assert attempt.state == "running"
+    # Each let end in turn: the next starts, and the attempt is judged once all ended.
+    ids = {run.pk for run in runs}
+    for _ in runs:
+        agent, run_id = await until(lambda: _one_running(agents, ids), timeout=120)
+        active = agent.runs[run_id]
+        await until(lambda a=active: a.process.box.folder, timeout=60)
+        (active.process.box.folder / "done").write_text("")
+        await until(lambda a=agent, r=run_id: r not in a.runs, timeout=60)
+    attempt = await done(attempt)
+    assert attempt.passed and attempt.score == 1.0, attempt.results
+
+
+async def _states_are(states, expected) -> bool:
+    return (await states())[0] == expected
+
+
+def _one_running(manager, run_ids: set[int]):
+    """(agent, run id) of a run of ``run_ids`` an agent runs now, or None."""
+    for agent, _task in list(manager.agents.values()):
+        for run_id in list(agent.runs):
+            if run_id in run_ids:
+                return agent, run_id
+    return None
+
+
+# -- a class at once -----------------------------------------------------------------------------
+
+
+@pytest.mark.django_db(transaction=True)
+async def test_25_students_checks_submitted_at_once_all_complete(agents, settings):
+    """25 Checks at once (one variant each, speed 10, a tiny program): every attempt recorded
+    and judged, none lost, every check sim gone after."""
+    tess, students, group = await sync_to_async(make_class)(25)
+    exercise = await sync_to_async(make_exercise)(
+        tess, group, variants=VARIANTS[:1], checks=CHECKS[1:]
+    )
+    programs = [await sync_to_async(program)(s, "print('hi')\n") for s in students]
+    start = sync_to_async(checking.start_attempt, thread_sensitive=False)
+    attempts = await asyncio.gather(
+        *(start(exercise, p, s) for p, s in zip(programs, students, strict=True))
+    )
+    finished = [await done(attempt, timeout=600) for attempt in attempts]
+    assert all(a.passed and a.score == 1.0 for a in finished), [a.results for a in finished]
+    count = sync_to_async(lambda: Attempt.objects.filter(exercise=exercise, state=DONE).count())
+    assert await count() == 25
+    await until(sync_to_async(lambda: live_check_sims() == 0), timeout=120)
