@@ -333,6 +333,15 @@ def _s(seconds: float) -> str:
     return f"{seconds:.1f}"
 
 
+def _late(seconds: float, limit: float) -> str:
+    """Seconds past a limit, with the decimals it takes not to read as within it."""
+    for digits in (1, 2, 3):
+        shown = f"{seconds:.{digits}f}"
+        if float(shown) > limit:
+            return shown
+    return f"{seconds:.3f}"
+
+
 def _m(metres: float) -> str:
     return f"{metres:.2f}"
 
@@ -354,7 +363,8 @@ def _reach_zone(check: dict, trace: Trace, world: World, _: Translate) -> Outcom
         return Outcome(
             False,
             _("it reached the %(zone)s zone after %(seconds)s s; the exercise wants it there "
-              "within %(within)s s") % {"zone": name, "seconds": _s(when), "within": f"{within:g}"},
+              "within %(within)s s")
+            % {"zone": name, "seconds": _late(when, within), "within": f"{within:g}"},
         )  # fmt: skip
     return Outcome(
         True,
@@ -393,7 +403,7 @@ def _zones_in_order(check: dict, trace: Trace, world: World, _: Translate) -> Ou
             False,
             _("it visited %(zones)s in that order, but only after %(seconds)s s; the exercise "
               "wants it done within %(within)s s")
-            % {"zones": order, "seconds": _s(when), "within": f"{within:g}"},
+            % {"zones": order, "seconds": _late(when, within), "within": f"{within:g}"},
         )  # fmt: skip
     return Outcome(
         True,
@@ -438,8 +448,12 @@ def _stop_near_wall(check: dict, trace: Trace, world: World, _: Translate) -> Ou
     x, y, _theta = trace.final_pose()
     gap = max(0.0, world.clearance(x, y) - trace.radius)
     nearest = _nearest_word(world, x, y, _)
-    words = {"gap": _m(gap), "nearest": nearest, **band}
-    if low <= gap + 5e-4 and gap - 5e-4 <= high:  # read at the millimetre
+    passed = low <= gap + 5e-4 and gap - 5e-4 <= high  # read at the millimetre
+    shown = _m(gap)
+    if passed != (low <= float(shown) <= high):  # not to read as in the band, or out of it
+        shown = f"{gap:.3f}"
+    words = {"gap": shown, "nearest": nearest, **band}
+    if passed:
         return Outcome(
             True,
             _("it stopped %(gap)s m from the nearest %(nearest)s, within %(min)s–%(max)s m")
@@ -480,7 +494,7 @@ def _ends_within(check: dict, trace: Trace, world: World, _: Translate) -> Outco
         return Outcome(
             False,
             _("it ended on its own after %(seconds)s s; the exercise wants it to end within "
-              "%(within)s s") % {"seconds": at, "within": f"{seconds:g}"},
+              "%(within)s s") % {"seconds": _late(end.t, seconds), "within": f"{seconds:g}"},
         )  # fmt: skip
     return Outcome(True, _("it ended on its own after %(seconds)s s") % {"seconds": at})
 

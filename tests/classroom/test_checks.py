@@ -512,7 +512,7 @@ async def test_no_why_gives_a_start_pose_away():
     ]
     checks = validate_checks(every, WORLD)
     allowed = re.compile(
-        r"\d+(\.\d)? s\b|\d+\.\d\d(–\d+\.\d\d)? m\b|\d+ (times|lines|texts)\b"
+        r"\d+(\.\d+)? s\b|\d+\.\d+(–\d+\.\d+)? m\b|\d+ (times|lines|texts)\b"
         r"|exit code \d+"
     )
     seen = set()
@@ -588,3 +588,14 @@ async def test_a_check_the_world_no_longer_allows_fails_saying_why():
     assert not evaluate(broken, trace, WORLD).passed
     unsaved = {"kind": "max_blocks", "count": -1}
     assert not evaluate_static(unsaved, "blocks", source("square.json")).passed
+
+
+def test_a_time_just_past_a_limit_does_not_read_as_within_it():
+    late = hand_made(
+        poses=[[0, -0.5, 1.0, 0], [30.04, -0.5, 1.4, 0]],
+        end={"t": 40.02, "state": "finished", "exit_code": 0, "reason": "", "time_limit": False},
+    )
+    trace = Trace.from_dict(late)
+    outcome = judge(trace, kind="reach_zone", zone="kitchen", within_s=30)
+    assert "after 30.04 s; the exercise wants it there within 30 s" in outcome.why
+    assert "after 40.02 s" in judge(trace, kind="ends_within", seconds=40).why
