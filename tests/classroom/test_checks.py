@@ -9,7 +9,10 @@ writes it (robots.check_sims). Edge cases are traces written by hand.
 
 import json
 import math
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -599,3 +602,15 @@ def test_a_time_just_past_a_limit_does_not_read_as_within_it():
     outcome = judge(trace, kind="reach_zone", zone="kitchen", within_s=30)
     assert "after 30.04 s; the exercise wants it there within 30 s" in outcome.why
     assert "after 40.02 s" in judge(trace, kind="ends_within", seconds=40).why
+
+
+def test_checks_are_plain_python_without_django():
+    code = (
+        "import sys, classroom.checks, classroom.trace, classroom.blocks_checks\n"
+        "assert not [m for m in sys.modules if m.split('.')[0] == 'django'], 'django imported'\n"
+    )
+    root = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    env.pop("DJANGO_SETTINGS_MODULE", None)
+    done = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True)
+    assert done.returncode == 0, done.stderr.decode()
