@@ -133,7 +133,7 @@ def _students(group: Group) -> list:
             run_count=count(Run),
             sim_count=count(Robot, personal=True, reaped__isnull=True, checking=False),
             one_time=Count("one_time_password"),
-        ).order_by("last_name", "first_name", "username")
+        ).order_by("first_name", "last_name", "username")
     )
     examples = _example_names()
     changed: dict[int, int] = {}
