@@ -427,7 +427,8 @@ def attempt_out(attempt: Attempt, user) -> dict:
 
 @exercises_router.post(
     "/{int:exercise_id}/check",
-    response={202: AttemptOut, **dict.fromkeys(CHECK_REFUSALS, Error)},
+    # 422's detail: a refusal's words, or pydantic's list for a body that is not {program}
+    response={202: AttemptOut, **dict.fromkeys(CHECK_REFUSALS, Error), 422: Invalid},
     summary="Check a program",
 )
 def check(request, exercise_id: int, data: CheckIn):
