@@ -60,7 +60,7 @@ CHECK_FIELDS: dict[str, dict] = {
     },
     "min_m": {"label": gettext_lazy("gap from (m)"), "type": "number", "step": "0.01"},
     "max_m": {"label": gettext_lazy("gap to (m)"), "type": "number", "step": "0.01"},
-    "seconds": {"label": gettext_lazy("within (s)"), "type": "number", "step": "0.1"},
+    "seconds": {"label": gettext_lazy("ends within (s)"), "type": "number", "step": "0.1"},
     "pattern": {
         "label": gettext_lazy("Pattern"),
         "type": "text",

@@ -74,7 +74,7 @@ def exercise_list(request: HttpRequest) -> HttpResponse:
         .annotate(
             attempt_count=Count("attempts", distinct=True),
             passed_count=Count("attempts__student", filter=Q(attempts__passed=True), distinct=True),
-            student_count=Count("attempts__student", distinct=True),
+            class_size=Count("group__user", distinct=True),
         )
         .order_by("group__name", "due", "title", "pk")
     )
@@ -331,11 +331,14 @@ def exercise_recheck(request: HttpRequest, pk: int) -> HttpResponse:
 def class_grid(request: HttpRequest, group_id: int) -> HttpResponse:
     _teacher(request)
     group = access.get_class_for_teacher(request.user, group_id)
-    return render(
-        request,
-        "classroom/grid.html",
-        {"group": group, "grid": grid(group), "csv_url": f"/api/classes/{group.pk}/grades.csv"},
-    )
+    table = grid(group)
+    passed = [sum(1 for _student, cells in table.rows() if cells[i].passed)
+              for i in range(len(table.exercises))]  # fmt: skip
+    context = {
+        "group": group, "grid": table, "passed": passed, "student_count": len(table.students),
+        "csv_url": f"/api/classes/{group.pk}/grades.csv",
+    }  # fmt: skip
+    return render(request, "classroom/grid.html", context)
 
 
 # -- classroom.documents (the api helper's) ---------------------------------------------------

@@ -247,7 +247,7 @@ def test_the_list_counts_attempts_and_passes(people):
     attempt(exercise, people["bob"], 1, 0)
     text = tina.get("/classroom/exercises/").content.decode()
     row = re.search(r"<tr>\s*<td><a[^>]*>Reach the kitchen</a>.*?</tr>", text, re.S).group(0)
-    assert "3 attempts" in row and "1 of 2 passed" in row and "class-a" in row
+    assert "3 attempts" in row and "1 of 2 passed" in row and "class-a" in row  # 2 students
     assert "A draft" in text and "draft</span>" in text
 
 
@@ -266,9 +266,10 @@ def test_the_grid_shows_each_students_counted_attempt(people):
     response = tina.get(f"/classroom/{people['class_a'].pk}/grid")
     assert response.status_code == 200
     text = response.content.decode()
+    body = re.search(r"<tbody>.*</tbody>", text, re.S).group(0)
     rows = {
         m.group(1): m.group(0)
-        for m in re.finditer(r'<tr>\s*<th scope="row"[^>]*>(\w+).*?</tr>', text, re.S)
+        for m in re.finditer(r'<tr>\s*<th scope="row"[^>]*>(\w+).*?</tr>', body, re.S)
     }
     assert set(rows) == {"Alice", "Bob"}  # the teacher is no row
     alice = re.findall(r"<td class=\"grid-cell([^\"]*)\".*?</td>", rows["Alice"], re.S)
@@ -278,22 +279,51 @@ def test_the_grid_shows_each_students_counted_attempt(people):
     assert f'href="/attempts/{last.pk}/"' in rows["Alice"] and "2/3" in rows["Alice"]
     assert "not checked yet" in rows["Bob"] and "1 attempt" in rows["Bob"]
     assert f'href="/api/classes/{people["class_a"].pk}/grades.csv"' in text
+    # Under each exercise, how many passed: "Latest counts" none (her latest did not).
+    foot = re.search(r"<tfoot>.*</tfoot>", text, re.S).group(0)
+    assert re.findall(r"<td>([^<]*)</td>", foot) == ["0 of 2", "1 of 2"]
 
 
-def test_recheck_is_offered_after_a_change_and_posts(people, monkeypatch):
+THREE_BLOCKS = json.dumps(
+    {"blocks": {"languageVersion": 0, "blocks": [
+        {"type": "robot_drive", "next": {"block": {"type": "robot_wait", "next": {
+            "block": {"type": "robot_stop"}}}}}]}}
+)  # fmt: skip
+
+
+def test_recheck_is_offered_after_a_change_and_posts(people):
+    """A blocks exercise's "at most N blocks" made stricter: the attempt that passed it is
+    offered to be checked again, and is, on its stored program (a static check: no run)."""
     tina = signed_in(people["tina"])
-    tina.post("/classroom/exercises/new", form(people["class_a"]))
+
+    def blocks(count: str) -> dict:
+        data = form(people["class_a"], languages="blocks", **{
+            "checks-0-kind": "max_blocks", "checks-0-count": count})  # fmt: skip
+        return {k: v for k, v in data.items() if not k.startswith("checks-5-")}
+
+    tina.post("/classroom/exercises/new", blocks("5"))
     exercise = Exercise.objects.get()
-    attempt(exercise, people["alice"], 1, 3, passed=True)
+    assert exercise.languages == ["blocks"] and exercise.checks[0]["count"] == 5
+    Attempt.objects.create(
+        exercise=exercise, student=people["alice"], number=1, language="blocks",
+        source=THREE_BLOCKS, state="done", score=2, max_score=2, passed=True,
+        results=[{"check": 0, "variant": None, "passed": True, "why": "", "points": 2}],
+    )  # fmt: skip
     url = f"/classroom/exercises/{exercise.pk}/edit"
     assert "Re-check everyone" not in tina.get(url).content.decode()
-    changed = form(people["class_a"], **{"checks-0-zone": "lab"})
-    response = tina.post(url, changed, follow=True)
+    # Saved unchanged: nothing to re-check.
+    response = tina.post(url, blocks("5"), follow=True)
+    assert "Re-check everyone" not in response.content.decode()
+    response = tina.post(url, blocks("2"), follow=True)
     exercise.refresh_from_db()
     assert exercise.version == 2
-    assert "Re-check everyone" in response.content.decode()
+    text = response.content.decode()
+    assert "Re-check everyone" in text and "One attempt was checked before" in text
     assert tina.get(f"/classroom/exercises/{exercise.pk}/recheck").status_code == 405
     response = tina.post(f"/classroom/exercises/{exercise.pk}/recheck", follow=True)
     assert response.status_code == 200
-    assert "1 attempt is being checked again" in response.content.decode()
-    assert Attempt.objects.get().exercise_version == 2
+    text = response.content.decode()
+    assert "1 attempt is being checked again" in text and "Re-check everyone" not in text
+    checked = Attempt.objects.get()
+    assert checked.exercise_version == 2
+    assert (checked.passed, checked.score) == (False, 0)

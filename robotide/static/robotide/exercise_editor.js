@@ -298,6 +298,14 @@
     }
 
     document.querySelector(".ex-map-box").hidden = false;
+    // Refused: the first field named in the errors is where the teacher goes on.
+    if (document.getElementById("ex-errors")) {
+      var invalid = form.querySelector("[aria-invalid=true]");
+      if (invalid) {
+        invalid.focus({ preventScroll: true });
+        invalid.scrollIntoView({ block: "center" });
+      }
+    }
     zoneNames();
     draw();
     if (!world && worldSelect.value) loadWorld(worldSelect.value);
