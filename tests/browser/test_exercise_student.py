@@ -4,12 +4,13 @@ Check, and an attempt's checklist and replay (scrubbed, played)."""
 
 import json
 import math
+import re
 
 import pytest
 from playwright.sync_api import Page, expect
 
 from tests.appliance import Appliance
-from tests.browser.test_pages import sign_in
+from tests.browser.test_pages import set_editor_text, sign_in
 
 PASSWORD = "user-pass-1234"
 SIZES = {"desktop": (1280, 800), "phone": (390, 844)}
@@ -171,7 +172,7 @@ def test_an_attempts_checklist_and_replay(appliance, new_page, screenshot):
     expect(checklist).to_contain_text("not passed")
     expect(checklist).to_contain_text("0 of 3 points")
     expect(checklist.locator("li.check.failed")).to_have_count(2)
-    expect(checklist).to_contain_text("hidden start 2: hidden variant 2: never reached kitchen")
+    expect(checklist).to_contain_text("hidden start 2: never reached kitchen")
     expect(checklist).to_contain_text("Look before you drive!")
     # One replay (the visible start's); the hidden one's is not offered.
     expect(page.locator("figure.replay")).to_have_count(1)
@@ -205,3 +206,66 @@ def test_an_attempts_checklist_and_replay(appliance, new_page, screenshot):
     teacher.goto(f"/attempts/{attempt_id}/")
     expect(teacher.locator("figure.replay")).to_have_count(2)
     expect(teacher.locator("#replay-1 canvas")).to_have_attribute("data-t", f"{END_T:.2f}")
+
+
+HELLO_SETUP = """\
+from django.contrib.auth.models import Group, User
+from classroom.models import Exercise
+from worlds.documents import builtin_worlds
+Exercise.objects.create(
+    owner=User.objects.get(username="tina"), group=Group.objects.get(name="class-a"),
+    title="Say hello", text="Print **hello**, drive a little, end.", world="boxes",
+    world_document=builtin_worlds()["boxes"], languages=["python"],
+    variants=[{"x": 0.0, "y": -0.8, "theta": 1.5708, "hidden": False},
+              {"x": -0.8, "y": 0.8, "theta": 0.0, "hidden": True}],
+    checks=[{"kind": "output_matches", "pattern": "hello", "points": 1, "message": ""},
+            {"kind": "ends_within", "seconds": 20, "points": 1, "message": "End it!"}],
+    starter="import robot\\n\\nbot = robot.Robot()\\n", starter_language="python",
+)
+"""
+HELLO = """\
+import time
+
+import robot
+
+bot = robot.Robot()
+print("hello")
+bot.drive(0.2, 0.0)
+time.sleep(2)
+bot.stop()
+"""
+
+
+def test_check_on_the_workbench_runs_every_start_and_the_checklist_follows(
+    appliance, new_page, screenshot
+):
+    """A real Check (classroom.checking): one run per start on fresh check sims; the
+    workbench's checklist follows the attempt until it is done, then its replay plays."""
+    appliance.cli("manage", "shell", "-c", HELLO_SETUP)
+    page = signed_in(new_page, "alice")
+    page.goto("/exercises/")
+    page.get_by_role("link", name="Say hello").click()
+    page.get_by_role("button", name="Start").click()
+    page.wait_for_url("**/programs/*/")
+    expect(page.locator(".CodeMirror")).to_be_visible()
+    set_editor_text(page, HELLO)
+    expect(page.locator("#save-state")).to_have_text("Unsaved changes")
+    page.get_by_role("button", name="Check").click()
+    # Saved first, as Save does, then checked: the checklist comes, and follows the attempt.
+    expect(page.locator("#save-state")).to_contain_text("Saved (revision 2)")
+    checklist = page.locator("#exercise-checklist .checklist")
+    expect(checklist).to_be_visible()
+    expect(checklist).to_have_attribute("data-state", "done", timeout=180_000)
+    expect(checklist).to_contain_text("passed")
+    expect(checklist).to_contain_text("2 of 2 points")
+    expect(checklist.locator("li.check.passed")).to_have_count(2)
+    expect(checklist).to_contain_text("hidden start 2")
+    expect(page.locator("#check-state")).to_have_text("Checked")
+    shot(page, screenshot, "exercise-student-checked")
+    checklist.get_by_role("link", name="Attempt 1").click()
+    expect(page.locator("figure.replay")).to_have_count(1)
+    canvas = page.locator("#replay-0 canvas")
+    expect(canvas).to_have_attribute("data-t", re.compile(r"^\d+\.\d\d$"))
+    page.locator("#replay-0 .replay-scrub").fill("0")
+    expect(canvas).to_have_attribute("data-pose", "0.000 -0.800 1.571")
+    expect(page.locator("#attempt-runs")).to_contain_text("its run is not shown")

@@ -12,6 +12,7 @@ from django.utils import timezone
 
 from classroom.markdown import render
 from classroom.models import Attempt, AttemptRun, Exercise, Work
+from programs.languages import BLOCKS_TEMPLATE
 from programs.models import Program, Run
 from robotide.models import ClassTeacher
 from robots.models import Robot
@@ -320,3 +321,71 @@ def test_try_refuses_a_robot_of_no_class_of_the_exercise(people, attempt):
     alice = signed_in(people["alice"])
     alice.post(f"/attempts/{attempt.pk}/try", {"robot": elsewhere.name})
     assert not Run.objects.filter(robot=elsewhere).exists()
+
+
+# -- Check, from the workbench ----------------------------------------------------------------
+
+
+def blocks_with_loop() -> str:
+    source = json.loads(BLOCKS_TEMPLATE)
+    body = source["blocks"]["blocks"][0]
+    source["blocks"]["blocks"] = [{
+        "type": "controls_repeat_ext", "id": "loop", "x": 10, "y": 10,
+        "inputs": {"TIMES": {"shadow": {"type": "math_number", "id": "n", "fields": {"NUM": 3}}},
+                   "DO": {"block": {k: v for k, v in body.items() if k not in "xy"}}},
+    }]  # fmt: skip
+    return json.dumps(source)
+
+
+@pytest.fixture
+def blocks_exercise(people) -> Exercise:
+    """Static checks only: judged at once, no runs."""
+    return Exercise.objects.create(
+        owner=people["tina"], group=people["group"], title="Loop it", world="boxes",
+        world_document=builtin_worlds()["boxes"], languages=["blocks"],
+        variants=[{**VISIBLE, "hidden": False}],
+        checks=[{"kind": "uses_block", "block": "loop", "points": 3, "message": "Repeat it!"},
+                {"kind": "max_blocks", "count": 10, "points": 1, "message": ""}],
+        starter=BLOCKS_TEMPLATE, starter_language="blocks",
+    )  # fmt: skip
+
+
+FETCH = {"HTTP_X_REQUESTED_WITH": "fetch"}
+
+
+def test_check_from_the_workbench(people, blocks_exercise):
+    alice = signed_in(people["alice"])
+    url = f"/exercises/{blocks_exercise.pk}/check"
+    # Not started: nothing to check.
+    assert alice.post(url, **FETCH).status_code == 400
+    alice.post(f"/exercises/{blocks_exercise.pk}/start")
+    program = Work.objects.get(student=people["alice"]).program
+    assert program.language == "blocks"
+    # The workbench's script (it saved first): the checklist of the new attempt.
+    response = alice.post(url, **FETCH)
+    assert response.status_code == 200
+    attempt = Attempt.objects.get(pk=response["X-Attempt"])
+    html = response.content.decode()
+    assert attempt.state == Attempt.State.DONE and not attempt.passed
+    assert "not passed" in html and "Repeat it!" in html and "Use a loop block" in html
+    assert 'hx-trigger="every 1s"' not in html  # done: no more polling
+    # Scripts off: the editor's form posts its text here, saved then checked.
+    response = alice.post(
+        url, {"source": blocks_with_loop(), "language": "blocks", "base_revision": "1",
+              "action": "check"},
+    )  # fmt: skip
+    assert response.status_code == 302 and response["Location"] == f"/programs/{program.pk}/"
+    second = Attempt.objects.get(student=people["alice"], number=2)
+    assert second.passed and second.score == 4 and second.revision_number == 2
+    bench = alice.get(f"/programs/{program.pk}/").content.decode()
+    assert f"/attempts/{second.pk}/" in bench and "4 of 4 points" in bench
+    # Refused: a Python program for a blocks-only exercise, the why shown.
+    Program.objects.filter(pk=program.pk).update(language="python")
+    refused = alice.post(url, **FETCH)
+    assert refused.status_code == 422
+    assert refused.json()["error"] == "this exercise takes blocks programs only"
+    page = alice.post(url, follow=True).content.decode()
+    assert "this exercise takes blocks programs only" in page
+    assert Attempt.objects.filter(student=people["alice"]).count() == 2
+    # Only its student checks it.
+    assert signed_in(people["bob"]).post(url, **FETCH).status_code == 400
