@@ -50,6 +50,7 @@ from classroom.forms_classes import (
 from classroom.models import Classroom, OneTimePassword, Work
 from programs.access import programs_for_user, runs_for_user
 from programs.models import Program, Run
+from robotide import names
 from robotide.models import ClassTeacher
 from robotide.security import locked_for, record_failure
 from robots.models import Robot, robots_for_user
@@ -107,8 +108,9 @@ def class_list(request: HttpRequest) -> HttpResponse:
     context = {
         "form": form,
         "mine": [group for group in classes if group.pk in taught],
-        # Staff see every class: those they do not teach apart.
-        "others": [group for group in classes if group.pk not in taught],
+        # Staff see every class: those they do not teach apart; a group that grants
+        # permissions is an admin's role, never a class (as DirectoryAccount.sync_classes).
+        "others": [g for g in classes.filter(permissions__isnull=True) if g.pk not in taught],
     }
     return render(request, "classroom/class_list.html", context, status=400 if form.errors else 200)
 
@@ -415,7 +417,9 @@ def _may_give(user, robot: Robot) -> bool:
 def class_robots(request: HttpRequest, group_id: int) -> HttpResponse:
     group = get_class_for_teacher(request.user, group_id)
     name, action = request.POST.get("robot", ""), request.POST.get("action")
-    robot = robots_for_user(request.user).filter(name=name, personal=False).first()
+    robot = None
+    if not names.problem(name):  # none is named so, and PostgreSQL cannot look for NUL
+        robot = robots_for_user(request.user).filter(name=name, personal=False).first()
     back = redirect(reverse("class-detail", args=[group.pk]) + "#robots")
     if robot is None or action not in ("give", "take"):
         messages.error(request, _("No robot named %(name)s.") % {"name": repr(name)})
@@ -588,6 +592,9 @@ def student_detail(request: HttpRequest, group_id: int, user_id: int) -> HttpRes
         "one_time": OneTimePassword.objects.filter(user=student).exists(),
         "local": _local_student(student),
         "filtered": bool(since or exercise),
+        # Staff who do not teach the class see only what is theirs to open (shared with them).
+        "partial": not viewer.is_superuser
+        and not ClassTeacher.objects.filter(group=group, user=viewer).exists(),
     }
     return render(request, "classroom/class_student.html", context)
 

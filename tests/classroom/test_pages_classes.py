@@ -463,3 +463,27 @@ def test_remove_a_student(tina, class_a, ana):
     client = signed_in(tina)
     client.post(f"/classroom/{class_a.pk}/students/{ana.pk}/remove")
     assert not ana.groups.exists() and User.objects.filter(pk=ana.pk).exists()
+
+
+def test_staff_see_every_class_but_roles(tina, class_a, ana):
+    from django.contrib.auth.models import Permission
+
+    role = Group.objects.create(name="lab admins")
+    role.permissions.add(Permission.objects.get(codename="view_robot"))
+    stella = User.objects.create_user("stella", password=PASSWORD, is_staff=True)
+    client = signed_in(stella)
+    listing = page(client.get("/classroom/"))
+    assert "Class 7B" in listing and "lab admins" not in listing
+    shown = page(client.get(f"/classroom/{class_a.pk}/students/{ana.pk}/"))
+    assert "You do not teach this class" in shown
+    assert "You do not teach" not in page(
+        signed_in(tina).get(f"/classroom/{class_a.pk}/students/{ana.pk}/")
+    )
+
+
+def test_odd_robot_names_are_refused(tina, class_a):
+    client = signed_in(tina)
+    response = client.post(
+        f"/classroom/{class_a.pk}/robots", {"robot": "lab\x00", "action": "give"}, follow=True
+    )
+    assert response.status_code == 200 and "No robot named" in page(response)
