@@ -25,6 +25,7 @@ from classroom.access import (
     get_attempt_for_user,
     get_class_for_teacher,
     get_exercise_for_user,
+    is_teacher,
     sees_hidden,
 )
 from classroom.accounts import MAX_STUDENTS, AccountsError, Entry, create_class, create_students
@@ -164,7 +165,11 @@ def list_classes(request):
 @classes_router.post("", response={201: ClassCreated, 422: Invalid}, summary="Create a class")
 def create_class_(request, data: ClassIn):
     """A class you teach, with the students' accounts that do not exist yet: each new one's
-    one-time password is in this answer, and only here (print it, hand it out)."""
+    one-time password is in this answer, and only here (print it, hand it out). Teachers
+    (who teach a class already) and staff only: a class's teacher reads its students'
+    programs, and anyone could otherwise make a class of their classmates."""
+    if not is_teacher(request.user):
+        raise PermissionDenied(_("Only teachers and staff make classes."))
     try:
         group = create_class(data.name, request.user)
     except AccountsError as exc:

@@ -128,6 +128,15 @@ def test_a_teacher_adds_students_only_to_their_classes(api, school):
     assert api["sam"]("GET", f"/api/classes/{school['a'].pk}").status_code == 200
 
 
+def test_only_teachers_and_staff_make_classes(api, school):
+    """Else a student would make a class of her classmates and read their programs."""
+    for who in ("alice", "carol"):
+        response = api[who]("POST", "/api/classes", {"name": "mine", "students": ["bob"]})
+        assert response.status_code == 403
+    assert not Group.objects.filter(name="mine").exists()
+    assert api["sam"]("POST", "/api/classes", {"name": "staff's"}).status_code == 201
+
+
 def test_teachers_and_staff_cannot_be_made_students(api, school):
     """A class's teachers read its students' programs: tina adding tom (a teacher) or sam
     (staff) to her class would read theirs."""
