@@ -194,6 +194,7 @@ class RobotAgent:
         self._taking: set[int] = set()
         self._boxed: dict[int, float] = {}
         self._last_press = 0  # the record (RobotStop id) of the last press heard
+        self.checking, self.check_time_limit = False, None  # a check sim's (_load_robot)
 
     # -- life cycle -----------------------------------------------------------------------
 
@@ -646,7 +647,8 @@ class RobotAgent:
         return active
 
     def _box_ahead(self, now: bool = False) -> None:
-        if self.isolation is not None and not self._shutting_down:
+        # Not for a check sim: its one run is asked as its agent starts, and takes its box then.
+        if self.isolation is not None and not self._shutting_down and not self.checking:
             self.boxes.soon(self._box_kind(self.gateway.program_env()), now)
 
     def _box_kind(self, program_env: dict) -> "BoxKind":
@@ -739,7 +741,7 @@ class RobotAgent:
             if active.trace is not None:  # saved before the run is marked ended: its check
                 await self._save_trace(active, outcome)  # reads it (classroom.checking)
             await self._end_run(active.run_id, outcome.state, outcome.exit_code, outcome.reason)
-        if not self.runs and not self.checking:  # the robot's next run finds its box made
+        if not self.runs:  # the robot's next run finds its box made
             self._box_ahead(now=True)
 
     async def _save_trace(self, active: ActiveRun, outcome) -> None:
