@@ -352,3 +352,66 @@ async def test_25_students_checks_submitted_at_once_all_complete(agents, setting
     count = sync_to_async(lambda: Attempt.objects.filter(exercise=exercise, state=DONE).count())
     assert await count() == 25
     await until(sync_to_async(lambda: live_check_sims() == 0), timeout=120)
+
+
+# -- the teacher changes the exercise; which attempt counts ------------------------------------
+
+
+@pytest.mark.django_db(transaction=True)
+async def test_recheck_judges_stored_traces_for_checks_and_runs_again_for_poses(agents):
+    tess, (ana,), group = await sync_to_async(make_class)(["ana"])
+    exercise = await sync_to_async(make_exercise)(
+        tess, group, variants=VARIANTS[:1], checks=CHECKS[1:]
+    )
+    says_hi = await sync_to_async(program)(ana, "print('hi', flush=True)\n")
+    first = await done(await sync_to_async(checking.start_attempt)(exercise, says_hi, ana))
+    assert first.passed and first.score == 1.0 and first.exercise_version == 1
+    runs = sync_to_async(lambda: Run.objects.filter(owner=ana).count())
+    assert await runs() == 1
+
+    # A check added: judged on the stored trace, no run.
+    def add_check():
+        exercise.checks = [*CHECKS[1:], {"kind": "output_matches", "pattern": "^bye$"}]
+        exercise.version += 1
+        exercise.save()
+        return checking.recheck(exercise)
+
+    touched = await sync_to_async(add_check)()
+    assert [a.pk for a in touched] == [first.pk] and await runs() == 1
+    await sync_to_async(first.refresh_from_db)()
+    assert first.state == DONE and first.exercise_version == 2, first.results
+    assert first.score == 1.0 and first.max_score == 2.0 and not first.passed
+    assert [row["passed"] for row in first.results] == [True, False]
+
+    # A start pose moved: run again, on a new check sim, and judged again.
+    def move_start():
+        exercise.variants = [{**VARIANTS[0], "x": -0.4}]
+        exercise.checks = CHECKS[1:]
+        exercise.version += 1
+        exercise.save()
+        return checking.recheck(exercise)
+
+    assert [a.pk for a in await sync_to_async(move_start)()] == [first.pk]
+    first = await done(first)
+    assert first.passed and first.exercise_version == 3 and await runs() == 2
+    assert await sync_to_async(checking.recheck)(exercise) == []  # nothing older: untouched
+
+
+@pytest.mark.django_db
+def test_the_counted_attempt_is_the_best_or_the_latest_among_the_first_n():
+    tess, (ana,), group = make_class(["ana"])
+    exercise = make_exercise(tess, group)
+    for number, score in ((1, 1.0), (2, 3.0), (3, 2.0), (4, 0.0)):
+        Attempt.objects.create(
+            exercise=exercise, student=ana, number=number, state=DONE, score=score
+        )
+    Attempt.objects.create(exercise=exercise, student=ana, number=5, state="error")
+    counted = lambda: checking.counted_attempt(exercise, ana).number  # noqa: E731
+    assert counted() == 2
+    exercise.counts = Exercise.Counts.LATEST
+    assert counted() == 4
+    exercise.attempts_allowed = 1
+    assert counted() == 1
+    exercise.counts, exercise.attempts_allowed = Exercise.Counts.BEST, 3
+    assert counted() == 2
+    assert checking.counted_attempt(exercise, tess) is None
