@@ -4,7 +4,8 @@ Two layers, so a mistake in one is caught by the other: markdown-it-py renders w
 off (a teacher's ``<script>`` comes out as text), then nh3 keeps only the tags Markdown makes,
 links to http(s), mailto or this site (each with ``rel="noopener noreferrer"``), and images
 from this site only (no other host sees who reads the exercise; no ``data:``). No style
-attributes (the CSP refuses inline styles; tables' column alignment is dropped).
+attributes (the CSP refuses inline styles; tables' column alignment is dropped). Headings go
+one level down: the page showing the text has its own title.
 """
 
 from functools import cache
@@ -49,7 +50,12 @@ def _attribute_filter(tag: str, attribute: str, value: str) -> str | None:
 
 def render(text: str) -> SafeString:
     """``text`` (Markdown) as sanitised HTML."""
-    html = _parser().render(text or "")
+    parser = _parser()
+    tokens = parser.parse(text or "")
+    for token in tokens:  # the page's own title is its h1: the text's headings one level down
+        if token.type in ("heading_open", "heading_close"):
+            token.tag = f"h{min(6, int(token.tag[1]) + 1)}"
+    html = parser.renderer.render(tokens, parser.options, {})
     cleaned = nh3.clean(
         html,
         tags=TAGS,

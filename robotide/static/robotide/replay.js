@@ -167,7 +167,10 @@
     (data.starts || []).forEach(function (start) { drawStart(ctx, X(start.x), Y(start.y), start.theta, radius * s, start.label); });
     if (data.start) drawStart(ctx, X(data.start.x), Y(data.start.y), data.start.theta, radius * s, "");
     var poses = data.poses || [];
-    if (!poses.length) return;
+    if (!poses.length) {
+      if (this.note && data.end) this.note.textContent = gettext("No path was recorded: the program did not move the robot.");
+      return;
+    }
     var now = this.poseAt(this.t);
     // The whole path faint, the part already driven strong.
     ctx.lineJoin = ctx.lineCap = "round";
@@ -215,6 +218,7 @@
   Replay.prototype.say = function (t) {
     if (this.time) {
       this.time.textContent = interpolate(gettext("%(t)s s of %(end)s s"), { t: t.toFixed(1), end: this.end.toFixed(1) }, true);
+      if (this.scrub) this.scrub.setAttribute("aria-valuetext", this.time.textContent);
     }
     if (!this.note) return;
     var data = this.data, last = null, kind = "";
