@@ -71,6 +71,10 @@ PATTERNS = [
         r"wall-clock time limit \((?P<seconds>[\d.]+) s\) reached",
         gettext_noop("wall-clock time limit (%(seconds)s s) reached"),
     ),
+    (  # a check run's (robots.check_sims)
+        r"time limit reached: (?P<seconds>[\d.]+) s of sim time",
+        gettext_noop("time limit reached: %(seconds)s s of sim time"),
+    ),
     (
         r"CPU time limit \((?P<seconds>[\d.]+) s\) reached",
         gettext_noop("CPU time limit (%(seconds)s s) reached"),
