@@ -10,6 +10,7 @@ import re
 import pytest
 from playwright.sync_api import Page, expect
 
+from tests.browser.test_accessibility import AXE, AXE_URL, axe_violations
 from tests.browser.test_pages import sign_in
 
 PASSWORD = "teach-pass-1234"
@@ -46,6 +47,7 @@ def page(new_page, class_id):
             errors.append(message.text)
 
     page.on("console", console)
+    page.route(f"**{AXE_URL}", lambda r: r.fulfill(path=AXE, content_type="text/javascript"))
     sign_in(page, "tess", PASSWORD)
     yield page
     assert not errors, errors
@@ -115,6 +117,8 @@ def test_a_teacher_writes_an_exercise_with_the_form(page, appliance, class_id, s
     expect(other.get_by_label("Zone", exact=True)).to_be_hidden()
     page.get_by_label("Time limit of a run").fill("40")
     screenshot(page, "exercise-editor-1280")
+    found = axe_violations(page)
+    assert not found, found
 
     page.get_by_role("button", name="Save").first.click()
     expect(page).to_have_url(EDIT_URL)
@@ -148,6 +152,7 @@ def test_a_teacher_writes_an_exercise_with_the_form(page, appliance, class_id, s
     zone = check(page, 0).get_by_label("Zone", exact=True)
     expect(zone).to_have_attribute("aria-invalid", "true")
     expect(page.locator("#checks-0-zone-error")).to_contain_text("attic")
+    expect(zone).to_be_focused()  # where the teacher goes on
     expect(variant(page, 1).get_by_label("hidden from students")).to_be_checked()
     screenshot(page, "exercise-editor-error-1280")
 
@@ -175,6 +180,8 @@ def test_the_editor_list_and_grid_on_a_phone(page, appliance, class_id, screensh
     expect(page.get_by_role("link", name="Stop near the wall").first).to_be_visible()
     assert page.evaluate("document.documentElement.scrollWidth") <= 390
     screenshot(page, "exercise-list-390")
+    found = axe_violations(page)
+    assert not found, found
 
     appliance.cli("manage", "shell", "-c", ATTEMPTS % {"exercise": exercise_id})
     page.goto(f"/classroom/{class_id}/grid")
@@ -192,6 +199,8 @@ def test_the_editor_list_and_grid_on_a_phone(page, appliance, class_id, screensh
     expect(name).to_be_in_viewport()
     assert name.bounding_box()["x"] < 40
     screenshot(page, "exercise-grid-390")
+    found = axe_violations(page)
+    assert not found, found
     page.set_viewport_size({"width": 1280, "height": 800})
     box.evaluate("el => { el.scrollLeft = 0; }")
     screenshot(page, "exercise-grid-1280")

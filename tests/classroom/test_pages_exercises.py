@@ -198,6 +198,46 @@ def test_edit_as_json(people):
     assert response.status_code == 422 and "not JSON" in response.content.decode()
 
 
+def test_a_stored_world_and_a_new_exercise_as_json(people):
+    from tests.worlds.documents import corridor
+    from worlds.documents import validated
+    from worlds.models import World
+
+    document = validated(corridor(), "corridor")
+    world = World.objects.create(owner=people["tina"], name="corridor", title="Corridor")
+    world.save_document(document, people["tina"])
+    tina = signed_in(people["tina"])
+    page = tina.get("/classroom/exercises/new").content.decode()
+    assert f'<option value="{world.pk}">Corridor</option>' in page
+    # Its own start pose, its zones: what the form offers for this world.
+    start = document["start"][0]
+    posted = form(people["class_a"], world=str(world.pk), **{
+        "variants-0-x": str(start["x"]), "variants-0-y": str(start["y"]),
+        "variants-3-x": None, "variants-3-y": None, "variants-3-theta_deg": None,
+        "variants-3-hidden": None, "checks-0-kind": "no_contact"})  # fmt: skip
+    response = tina.post("/classroom/exercises/new", posted)
+    assert response.status_code == 302, response.content.decode()
+    exercise = Exercise.objects.get()
+    assert exercise.world == str(world.pk) and exercise.world_document == world.document
+    page = tina.get(f"/classroom/exercises/{exercise.pk}/edit").content.decode()
+    assert re.search(rf'<option value="{world.pk}" selected>Corridor</option>', page)
+    # Another teacher's world is not offered, nor taken.
+    tom = signed_in(people["tom"])
+    assert "Corridor" not in tom.get("/classroom/exercises/new").content.decode()
+    response = tom.post("/classroom/exercises/new", {**posted, "class": ""})
+    assert response.status_code == 422 and Exercise.objects.count() == 1
+    assert re.search(r'id="ex-world-error">[^<]*no world', response.content.decode())
+    # A new exercise written as JSON.
+    page = tina.get("/classroom/exercises/new?as=json").content.decode()
+    assert "&quot;world&quot;: &quot;boxes&quot;" in page
+    new = {"title": "By JSON", "world": "maze", "class": people["class_a"].pk,
+           "checks": [{"kind": "reach_zone", "zone": "goal"}]}  # fmt: skip
+    response = tina.post("/classroom/exercises/new", {"mode": "json", "document": json.dumps(new)})
+    made = Exercise.objects.get(title="By JSON")
+    assert response["Location"] == f"/classroom/exercises/{made.pk}/edit"
+    assert made.checks[0]["zone"] == "goal" and made.variants[0]["hidden"] is False
+
+
 def test_a_teacher_cannot_edit_another_teachers_exercise(people):
     signed_in(people["tina"]).post("/classroom/exercises/new", form(people["class_a"]))
     exercise = Exercise.objects.get()
