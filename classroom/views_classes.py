@@ -11,6 +11,7 @@ programs.access, robots.models, worlds.access).
 """
 
 import base64
+import functools
 import hashlib
 import hmac
 import json
@@ -69,13 +70,13 @@ JOIN_THROTTLE_PREFIX = "join\0"  # join codes' failures: counted as sign-ins', p
 def teacher_required(view):
     """Signed in, and teaches a class (or is staff): others get 403."""
 
+    @functools.wraps(view)
     @login_required
     def wrapped(request, *args, **kwargs):
         if not teaches_a_class(request.user):
             raise PermissionDenied(_("Only a class's teachers and staff see the classroom."))
         return view(request, *args, **kwargs)
 
-    wrapped.__name__, wrapped.__doc__ = view.__name__, view.__doc__
     return wrapped
 
 
