@@ -25,6 +25,7 @@ from django.utils.translation import ngettext
 from django.views.decorators.http import require_POST
 
 from classroom import access, documents
+from classroom.checking import counted_attempt, recheck
 from classroom.forms_exercises import (
     BLOCK_SUGGESTIONS,
     CHECK_FIELDS,
@@ -176,10 +177,18 @@ def _editor(
 
 
 def _stale_attempts(exercise: Exercise | None) -> int:
-    """How many attempts were checked under an older version of the exercise."""
+    """How many students' counted attempts were checked under an older version of the
+    exercise: what "Re-check everyone" checks again (classroom.checking.recheck)."""
     if exercise is None or exercise.pk is None:
         return 0
-    return exercise.attempts.filter(exercise_version__lt=exercise.version).count()
+    old = exercise.attempts.filter(exercise_version__lt=exercise.version)
+    students = set(old.values_list("student_id", flat=True))
+    return sum(
+        1
+        for student in students
+        if (counted := counted_attempt(exercise, student)) is not None
+        and counted.exercise_version < exercise.version
+    )
 
 
 def _render_markdown(text: str):
@@ -308,8 +317,6 @@ def _submit_json(request: HttpRequest, exercise: Exercise | None) -> HttpRespons
 @require_POST
 def exercise_recheck(request: HttpRequest, pk: int) -> HttpResponse:
     exercise = _editable(request, pk)
-    from classroom.checking import recheck
-
     touched = recheck(exercise)
     count = len(touched) if touched is not None else 0
     messages.success(

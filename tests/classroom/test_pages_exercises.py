@@ -367,3 +367,27 @@ def test_recheck_is_offered_after_a_change_and_posts(people):
     checked = Attempt.objects.get()
     assert checked.exercise_version == 2
     assert (checked.passed, checked.score) == (False, 0)
+
+
+def test_recheck_is_offered_for_counted_attempts_only(people):
+    """An attempt that does not count (a worse one, the best counts) is not re-checked: once
+    the counted ones are, nothing is offered any more."""
+    tina = signed_in(people["tina"])
+    data = form(people["class_a"], languages="blocks", **{
+        "checks-0-kind": "max_blocks", "checks-0-count": "5"})  # fmt: skip
+    data = {k: v for k, v in data.items() if not k.startswith("checks-5-")}
+    tina.post("/classroom/exercises/new", data)
+    exercise = Exercise.objects.get()
+    for number, passed in ((1, True), (2, False)):
+        Attempt.objects.create(
+            exercise=exercise, student=people["alice"], number=number, language="blocks",
+            source=THREE_BLOCKS, state="done", score=2 if passed else 0, max_score=2,
+            passed=passed,
+        )  # fmt: skip
+    url = f"/classroom/exercises/{exercise.pk}/edit"
+    text = tina.post(url, {**data, "checks-0-count": "4"}, follow=True).content.decode()
+    assert "One attempt was checked before" in text  # alice's counted one, not two
+    text = tina.post(f"/classroom/exercises/{exercise.pk}/recheck", follow=True).content.decode()
+    assert "1 attempt is being checked again" in text and "Re-check everyone" not in text
+    versions = dict(Attempt.objects.values_list("number", "exercise_version"))
+    assert versions == {1: 2, 2: 1}

@@ -33,6 +33,13 @@
     var zoneList = document.getElementById("ex-zone-names");
     var world = data.world;
     var loading = 0;
+    // What was typed and not saved yet (a refused page's too): leaving the page asks first.
+    var dirty = !!document.getElementById("ex-errors");
+    function touched() { dirty = true; }
+    form.addEventListener("input", touched);
+    form.addEventListener("change", touched);
+    form.addEventListener("submit", function () { dirty = false; });
+    window.addEventListener("beforeunload", function (event) { if (dirty) event.preventDefault(); });
 
     // -- rows ---------------------------------------------------------------------------------
 
@@ -53,6 +60,7 @@
       var row = holder.querySelector("li");
       list.appendChild(row);
       renumber(list);
+      touched();
       if (kind === "check") {
         showKindFields(row);
         var none = document.getElementById("ex-no-checks");
@@ -93,6 +101,7 @@
         var next = li.nextElementSibling || li.previousElementSibling;
         li.remove();
         renumber(list);
+        touched();
         // Focus stays in the list (or goes to its add button): not lost to the page's top.
         var target = next ? next.querySelector("input, select") : form.querySelector("[data-add=" + (list === variants ? "variant" : "check") + "]");
         if (target) target.focus();
