@@ -102,6 +102,13 @@ def test_a_teacher_writes_an_exercise_with_the_form(page, appliance, class_id, s
     expect(second.get_by_label("hidden from students")).to_be_checked()
     expect(page.locator("#ex-map .ex-pose.hidden")).to_have_count(1)
     expect(page.locator("#ex-map-state")).to_contain_text("Hidden start pose 2 added")
+    # The first one dragged from (0, 0) to (0, -0.5).
+    page.mouse.move(*screen(page, 0.0, 0.0))
+    page.mouse.down()
+    page.mouse.move(*screen(page, 0.0, -0.5), steps=6)
+    page.mouse.up()
+    expect(variant(page, 0).get_by_label("y (m)")).to_have_value("-0.5")
+    expect(page.locator("#ex-variants > li")).to_have_count(2)
 
     # Checks: reach the kitchen (its zone offered from the world), never touch anything.
     page.get_by_role("button", name="Add a check").click()
@@ -140,6 +147,7 @@ def test_a_teacher_writes_an_exercise_with_the_form(page, appliance, class_id, s
     # Its document, as the JSON view has it: theta in radians, the hidden pose's too.
     page.get_by_role("link", name="Edit as JSON").click()
     document = json.loads(page.locator("#ex-document").input_value())
+    assert document["variants"][0]["y"] == -0.5
     assert document["variants"][1] == {"x": 0.5, "y": -1.0, "theta": 0.0, "hidden": True}
     assert [c["kind"] for c in document["checks"]] == ["reach_zone", "no_contact"]
     assert document["checks"][0]["within_s"] == 25 and document["time_limit_s"] == 40

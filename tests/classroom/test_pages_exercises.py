@@ -309,7 +309,7 @@ def test_the_grid_shows_each_students_counted_attempt(people):
     body = re.search(r"<tbody>.*</tbody>", text, re.S).group(0)
     rows = {
         m.group(1): m.group(0)
-        for m in re.finditer(r'<tr>\s*<th scope="row"[^>]*>(\w+).*?</tr>', body, re.S)
+        for m in re.finditer(r'<tr>\s*<th scope="row"[^>]*><a[^>]*>(\w+).*?</tr>', body, re.S)
     }
     assert set(rows) == {"Alice", "Bob"}  # the teacher is no row
     alice = re.findall(r"<td class=\"grid-cell([^\"]*)\".*?</td>", rows["Alice"], re.S)
@@ -318,6 +318,8 @@ def test_the_grid_shows_each_students_counted_attempt(people):
     assert "3/3" in rows["Alice"] and "2 attempts" in rows["Alice"]
     assert f'href="/attempts/{last.pk}/"' in rows["Alice"] and "2/3" in rows["Alice"]
     assert "not checked yet" in rows["Bob"] and "1 attempt" in rows["Bob"]
+    group = people["class_a"].pk
+    assert f'href="/classroom/{group}/students/{people["alice"].pk}/"' in rows["Alice"]
     assert f'href="/api/classes/{people["class_a"].pk}/grades.csv"' in text
     # Under each exercise, how many passed: "Latest counts" none (her latest did not).
     foot = re.search(r"<tfoot>.*</tfoot>", text, re.S).group(0)

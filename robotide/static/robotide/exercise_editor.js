@@ -192,7 +192,7 @@
         var y = num(li.querySelector("[data-field=y]").value);
         var deg = num(li.querySelector("[data-field=theta_deg]").value);
         if (x === null || y === null) return;
-        list.push({ n: i + 1, x: x, y: y, theta: ((deg || 0) * Math.PI) / 180, hidden: li.querySelector("[data-field=hidden]").checked });
+        list.push({ n: i + 1, x: x, y: y, theta: ((deg || 0) * Math.PI) / 180, hidden: li.querySelector("[data-field=hidden]").checked, row: li });
       });
       return list;
     }
@@ -259,18 +259,44 @@
       return world && world.size && Math.abs(p.x) <= world.size.width / 2 && Math.abs(p.y) <= world.size.height / 2;
     }
 
+    // A press on a start pose drags it (a click on it goes to its row); elsewhere it places
+    // a new one.
     var press = null;
+    var moving = null; // {row, from: {x, y}, at: {x, y}, moved}
+    function poseAt(p) {
+      var found = null;
+      poses().forEach(function (pose) {
+        if (Math.hypot(pose.x - p.x, pose.y - p.y) <= ROBOT_RADIUS * 1.2) found = pose;
+      });
+      return found;
+    }
     map.addEventListener("pointerdown", function (event) {
       if (!world || event.button > 0) return;
       var p = point(event);
       if (!inside(p)) return;
       event.preventDefault();
       map.setPointerCapture(event.pointerId);
+      var hit = poseAt(p);
+      if (hit) {
+        moving = { row: hit.row, n: hit.n, at: p, moved: false };
+        return;
+      }
       press = { x: snap(p.x), y: snap(p.y) };
       ghost = { x: press.x, y: press.y, theta: Math.PI / 2, hidden: newHidden.checked };
       draw();
     });
     map.addEventListener("pointermove", function (event) {
+      if (moving) {
+        var q = point(event);
+        if (!moving.moved && Math.hypot(q.x - moving.at.x, q.y - moving.at.y) < DRAG / 2) return;
+        moving.moved = true;
+        if (!inside(q)) return;
+        moving.row.querySelector("[data-field=x]").value = String(snap(q.x));
+        moving.row.querySelector("[data-field=y]").value = String(snap(q.y));
+        touched();
+        draw();
+        return;
+      }
       if (!press) return;
       var p = point(event);
       var dx = p.x - press.x, dy = p.y - press.y;
@@ -280,6 +306,19 @@
       draw();
     });
     function release(event, keep) {
+      if (moving) {
+        var row = moving.row, n = moving.n, moved = moving.moved;
+        moving = null;
+        if (map.hasPointerCapture(event.pointerId)) map.releasePointerCapture(event.pointerId);
+        if (!moved) {
+          row.querySelector("[data-field=x]").focus();
+        } else {
+          say(interpolate(gettext("Start pose %(n)s moved to x %(x)s m, y %(y)s m."), {
+            n: n, x: row.querySelector("[data-field=x]").value, y: row.querySelector("[data-field=y]").value }, true));
+        }
+        draw();
+        return;
+      }
       if (!press) return;
       var pose = ghost;
       press = null;
