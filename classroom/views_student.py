@@ -31,7 +31,7 @@ from classroom.access import (
     get_exercise_for_user,
     sees_hidden,
 )
-from classroom.grades import counted_attempt
+from classroom.checking import CheckRefused, counted_attempt, start_attempt
 from classroom.models import Attempt, AttemptRun, Exercise, Work
 from classroom.templatetags.classroom_student import check_words, variant_name
 from programs.access import EDIT, READ, can
@@ -165,8 +165,6 @@ def exercise_check(request: HttpRequest, pk: int) -> HttpResponse:
     """Check the user's program for the exercise. From the workbench's script (saved just
     before): the checklist, which follows the attempt. From the plain form (scripts off): the
     editor's text saved first, then back to the program."""
-    from classroom.checking import CheckRefused, start_attempt
-
     exercise = get_exercise_for_user(request.user, pk)
     work = own_work(exercise, request.user)
     scripted = request.headers.get("X-Requested-With") == "fetch"
