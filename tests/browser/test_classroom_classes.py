@@ -10,6 +10,7 @@ import re
 import pytest
 from playwright.sync_api import expect
 
+from tests.browser.test_accessibility import AXE, AXE_URL, axe_violations
 from tests.browser.test_fit import measure, small_targets
 from tests.browser.test_pages import sign_in
 
@@ -24,8 +25,19 @@ def teacher(appliance):
     return "tereza"
 
 
+def with_axe(page):
+    """axe-core on hand at AXE_URL (answered here, never by the appliance)."""
+    page.route(
+        f"**{AXE_URL}", lambda route: route.fulfill(path=AXE, content_type="text/javascript")
+    )
+    return page
+
+
 def shots(page, screenshot, name: str) -> None:
-    """The page at both widths, each checked not to scroll sideways."""
+    """The page at both widths, each checked not to scroll sideways, its targets big enough
+    for a finger on a phone, and no serious or critical axe-core violation."""
+    found = axe_violations(page)
+    assert not found, (name, found)
     for label, (width, height) in WIDTHS.items():
         page.set_viewport_size({"width": width, "height": height})
         fit = measure(page)
@@ -39,7 +51,7 @@ def shots(page, screenshot, name: str) -> None:
 def test_class_of_three_sheet_printed_and_first_sign_in(
     new_page, appliance, teacher, screenshot, tmp_path
 ):
-    page = new_page()
+    page = with_axe(new_page())
     sign_in(page, teacher, PASSWORD)
     menu = page.locator("header.top nav")
     expect(menu.get_by_role("link", name="Exercises")).to_be_visible()
@@ -95,7 +107,7 @@ def test_class_of_three_sheet_printed_and_first_sign_in(
     shots(page, screenshot, "list")
 
     # The student's first sign-in: their own password before anything else.
-    student = new_page()
+    student = with_axe(new_page())
     sign_in(student, username, password)
     expect(student).to_have_url(re.compile(r"/accounts/password/$"))
     expect(student.locator(".messages")).to_contain_text("Choose a password of your own")
@@ -124,14 +136,14 @@ def test_class_of_three_sheet_printed_and_first_sign_in(
 
 def test_join_with_the_code(new_page, appliance, teacher, screenshot):
     """A student makes their own account with the class's join code, as read off a board."""
-    page = new_page()
+    page = with_axe(new_page())
     sign_in(page, teacher, PASSWORD)
     page.goto("/classroom/")
     page.get_by_label("Name").fill("Robotics 8C")
     page.get_by_role("button", name="Make the class").click()
     code = page.locator("#join-code").inner_text()
 
-    student = new_page()
+    student = with_axe(new_page())
     student.goto("/accounts/join/")
     shots(student, screenshot, "join")
     student.get_by_label("Join code").fill("WRONG-CODE")
