@@ -10,6 +10,7 @@ import pytest
 from playwright.sync_api import Page, expect
 
 from tests.appliance import Appliance
+from tests.browser.test_accessibility import AXE, AXE_URL, axe_violations
 from tests.browser.test_pages import set_editor_text, sign_in
 
 PASSWORD = "user-pass-1234"
@@ -118,8 +119,17 @@ def appliance(tmp_path_factory):
 
 def signed_in(new_page, username: str) -> Page:
     page = new_page()
+    page.route(
+        f"**{AXE_URL}", lambda route: route.fulfill(path=AXE, content_type="text/javascript")
+    )
     sign_in(page, username, PASSWORD)
     return page
+
+
+def accessible(page: Page, name: str) -> None:
+    """axe-core finds no serious or critical violation on the page as it is now."""
+    found = axe_violations(page)
+    assert not found, f"axe-core on {name}: {found}"
 
 
 def shot(page: Page, screenshot, name: str) -> None:
@@ -134,6 +144,7 @@ def test_open_an_exercise_start_it_and_the_workbench_has_check(appliance, new_pa
     page.get_by_role("link", name="Exercises").click()
     expect(page.get_by_role("heading", name="Exercises")).to_be_visible()
     shot(page, screenshot, "exercise-student-list")
+    accessible(page, "the exercise list")
     page.get_by_role("link", name="Reach the kitchen").first.click()
     expect(page.get_by_role("heading", name="Reach the kitchen")).to_be_visible()
     expect(page.locator("#exercise-text strong")).to_have_text("kitchen")
@@ -150,6 +161,7 @@ def test_open_an_exercise_start_it_and_the_workbench_has_check(appliance, new_pa
     )
     assert str(HIDDEN["x"]) not in page.content()
     shot(page, screenshot, "exercise-student-exercise")
+    accessible(page, "an exercise")
 
     page.get_by_role("button", name="Start").click()
     page.wait_for_url("**/programs/*/")
@@ -158,6 +170,7 @@ def test_open_an_exercise_start_it_and_the_workbench_has_check(appliance, new_pa
     expect(check).to_be_visible()
     expect(page.locator("#exercise-checklist")).to_contain_text("Not checked yet")
     shot(page, screenshot, "exercise-student-workbench")
+    accessible(page, "an exercise's workbench")
     # Back on the exercise: its program opens.
     page.goto(page.locator("#exercise-bench h2 a").get_attribute("href"))
     expect(page.get_by_role("link", name="Open my program")).to_be_visible()
@@ -193,6 +206,7 @@ def test_an_attempts_checklist_and_replay(appliance, new_page, screenshot):
     expect(canvas).to_have_attribute("data-pose", f"{mid_x:.3f} {mid_y:.3f} {heading:.3f}")
     expect(page.locator("#replay-0 .replay-note")).to_contain_text("1 contact so far")
     shot(page, screenshot, "exercise-student-attempt")
+    accessible(page, "an attempt")
     # Played from there, it goes on to the end, and the time shown follows it.
     page.locator("#replay-0 .replay-play").click()
     expect(canvas).to_have_attribute("data-t", f"{END_T:.2f}")
