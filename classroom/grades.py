@@ -12,6 +12,7 @@ from django.contrib.auth.models import Group
 from django.db.models import Count, Max
 from django.utils.translation import gettext as _
 
+from classroom.checking import counted_attempt
 from classroom.models import Attempt, Exercise
 
 #: A spreadsheet reads a cell starting with one of these as a formula (CSV injection).
@@ -43,23 +44,6 @@ class Grid:
         """(student, [cell for each exercise]) for each student."""
         for student in self.students:
             yield student, [self.cell(student, exercise) for exercise in self.exercises]
-
-
-def counted_attempt(exercise: Exercise, student) -> Attempt | None:
-    """The attempt that counts (classroom.checking's rule): among the student's first
-    ``attempts_allowed`` checked attempts (all when unset), the best (the first of the best
-    score) or the latest."""
-    done = Attempt.objects.filter(
-        exercise=exercise, student=student, state=Attempt.State.DONE
-    ).order_by("number")
-    if exercise.attempts_allowed:
-        done = done[: exercise.attempts_allowed]
-    done = list(done)
-    if not done:
-        return None
-    if exercise.counts == Exercise.Counts.LATEST:
-        return done[-1]
-    return max(done, key=lambda attempt: (attempt.score, -attempt.number))
 
 
 def grid(group: Group) -> Grid:
