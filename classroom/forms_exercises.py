@@ -196,6 +196,8 @@ class EditorState:
     @classmethod
     def from_post(cls, post) -> EditorState:
         scalars = {name: post.get(name, "") for name in SCALARS}
+        for name in ("text", "starter"):  # a browser's textarea sends CRLF
+            scalars[name] = scalars[name].replace("\r\n", "\n")
         rows: dict[tuple[str, int], dict] = {}
         for key in post:
             if match := ROW.match(key):

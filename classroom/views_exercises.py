@@ -224,11 +224,17 @@ def exercise_new(request: HttpRequest) -> HttpResponse:
 
 
 def _blank(request) -> dict:
-    classes = list(access.classes_for_teacher(request.user)[:2])
+    """A new exercise: for the class named by ``?class=`` (from a class's page) if its
+    teacher's, or the only class they teach; else a draft until they choose."""
+    taught = access.classes_for_teacher(request.user)
+    asked = request.GET.get("class", "")
+    chosen = taught.filter(pk=int(asked)).first() if asked.isdigit() else None
+    if chosen is None:
+        classes = list(taught[:2])
+        chosen = classes[0] if len(classes) == 1 else None
     world = "boxes"
     start = builtin_worlds()[world]["start"][0]
-    # Who teaches one class writes for it; with more, they choose (a draft until then).
-    return blank_document(world, start, classes[0].pk if len(classes) == 1 else None)
+    return blank_document(world, start, chosen.pk if chosen else None)
 
 
 @login_required

@@ -147,6 +147,7 @@ def test_a_teacher_writes_an_exercise_with_the_form(page, appliance, class_id, s
     # Its document, as the JSON view has it: theta in radians, the hidden pose's too.
     page.get_by_role("link", name="Edit as JSON").click()
     document = json.loads(page.locator("#ex-document").input_value())
+    screenshot(page, "exercise-json-1280")
     assert document["variants"][0]["y"] == -0.5
     assert document["variants"][1] == {"x": 0.5, "y": -1.0, "theta": 0.0, "hidden": True}
     assert [c["kind"] for c in document["checks"]] == ["reach_zone", "no_contact"]
@@ -212,6 +213,8 @@ def test_the_editor_list_and_grid_on_a_phone(page, appliance, class_id, screensh
     page.set_viewport_size({"width": 1280, "height": 800})
     box.evaluate("el => { el.scrollLeft = 0; }")
     screenshot(page, "exercise-grid-1280")
+    page.goto("/classroom/exercises/")
+    screenshot(page, "exercise-list-1280")
 
 
 # Attempts of the class's students on its exercises (a grid to look at): made directly, as

@@ -81,7 +81,13 @@ def test_a_teacher_creates_an_exercise_with_the_form(people):
     assert page.status_code == 200
     text = page.content.decode()
     assert 'name="title"' in text and "class-a" in text and "class-b" not in text
-    response = tina.post("/classroom/exercises/new", form(people["class_a"]))
+    # Her only class is chosen already; the class a page asks for, if hers.
+    assert re.search(rf'<option value="{people["class_a"].pk}" selected>', text)
+    other = tina.get(f"/classroom/exercises/new?class={people['class_b'].pk}").content.decode()
+    assert re.search(rf'<option value="{people["class_a"].pk}" selected>', other)
+    data = form(people["class_a"], text="Drive to the **kitchen**.\r\n\r\nNow.",
+                due="2026-12-20T18:00", attempts="3")  # fmt: skip
+    response = tina.post("/classroom/exercises/new", data)
     exercise = Exercise.objects.get()
     assert response.status_code == 302 and response["Location"] == (
         f"/classroom/exercises/{exercise.pk}/edit"
@@ -95,12 +101,15 @@ def test_a_teacher_creates_an_exercise_with_the_form(people):
     kinds = [(c["kind"], c.get("zone"), c["points"], c["message"]) for c in exercise.checks]
     assert kinds == [("reach_zone", "kitchen", 2, "Find the kitchen."), ("no_contact", None, 1, "")]
     assert exercise.checks[0]["within_s"] == 20
-    assert exercise.time_limit_s == 30 and exercise.text == "Drive to the **kitchen**."
+    assert exercise.time_limit_s == 30 and exercise.text == "Drive to the **kitchen**.\n\nNow."
     # Opened again, the form shows what was saved: degrees, the hidden box ticked.
     text = tina.get(f"/classroom/exercises/{exercise.pk}/edit").content.decode()
     assert 'name="variants-1-theta_deg" value="180"' in text
     assert re.search(r'name="variants-1-hidden"[^>]*checked', text)
     assert 'name="checks-0-zone" value="kitchen"' in text
+    # The due date in the server's time zone, as typed.
+    assert timezone.localtime(exercise.due).strftime("%Y-%m-%d %H:%M") == "2026-12-20 18:00"
+    assert 'name="due" value="2026-12-20T18:00"' in text and exercise.attempts_allowed == 3
 
 
 def test_saving_unchanged_keeps_the_version(people):
