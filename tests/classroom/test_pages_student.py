@@ -389,3 +389,14 @@ def test_check_from_the_workbench(people, blocks_exercise):
     assert Attempt.objects.filter(student=people["alice"]).count() == 2
     # Only its student checks it.
     assert signed_in(people["bob"]).post(url, **FETCH).status_code == 400
+
+
+def test_pages_in_portuguese(people, exercise, attempt):
+    """Every page renders in the other language (its numbers with a decimal comma)."""
+    alice = signed_in(people["alice"])
+    alice.cookies["django_language"] = "pt-br"
+    for path in ("/exercises/", f"/exercises/{exercise.pk}/", f"/attempts/{attempt.pk}/"):
+        response = alice.get(path)
+        assert response.status_code == 200, path
+        assert 'lang="pt-br"' in response.content.decode(), path
+        no_hidden_figures(response.content.decode())
