@@ -40,6 +40,7 @@ from classroom.trace import Trace
 from programs.models import Program, Revision
 from rhal.simulator.world import World
 from robots import check_sims
+from runlogs.system_words import translated
 
 log = logging.getLogger(__name__)
 
@@ -190,7 +191,7 @@ def variant_results(exercise: Exercise, attempt_run: AttemptRun, world: World) -
     doc = check_sims.read_trace(run) if run is not None else None
     trace, why_not = None, ""
     if doc is None:
-        reason = (run.reason_shown or run.get_state_display()) if run is not None else ""
+        reason = (translated(run.reason) or run.get_state_display()) if run is not None else ""
         why_not = _("the program did not run: %(reason)s") % {"reason": reason or _("no run")}
     else:
         try:
@@ -285,10 +286,13 @@ def fail_attempt(attempt_run_id: int, exc: Exception) -> None:
 
 
 def run_started(run_id: int) -> None:
-    """An agent took one of an attempt's runs: the attempt is running."""
-    Attempt.objects.filter(runs__run_id=run_id, state=Attempt.State.QUEUED).update(
-        state=Attempt.State.RUNNING
-    )
+    """An agent took one of an attempt's runs: the attempt is running. (Every run's start
+    asks: a read, no write unless it is an attempt's.)"""
+    attempt_id = AttemptRun.objects.filter(run_id=run_id).values_list("attempt", flat=True)
+    if attempt_id := attempt_id.first():
+        Attempt.objects.filter(pk=attempt_id, state=Attempt.State.QUEUED).update(
+            state=Attempt.State.RUNNING
+        )
 
 
 # -- the teacher changed the exercise ----------------------------------------------------------

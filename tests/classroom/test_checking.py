@@ -310,7 +310,8 @@ async def test_check_runs_beyond_the_servers_cap_wait_queued_saying_why(agents, 
     for _ in runs:
         agent, run_id = await until(lambda: _one_running(agents, ids), timeout=120)
         active = agent.runs[run_id]
-        await until(lambda a=active: a.process.box.folder, timeout=60)
+        # its home made (the box is up before its program is in it)
+        await until(lambda a=active: a.process.box.folder and a.process.box.folder.is_dir(), 60)
         (active.process.box.folder / "done").write_text("")
         await until(lambda a=agent, r=run_id: r not in a.runs, timeout=60)
     attempt = await done(attempt)
