@@ -23,23 +23,51 @@ from django.utils.translation import gettext_lazy
 
 #: The check kinds (classroom.checks) and the fields of each, in the order shown.
 CHECK_KINDS: dict[str, dict] = {
-    "reach_zone": {"label": gettext_lazy("Reach a zone"), "fields": ["zone", "within_s"]},
+    "reach_zone": {
+        "label": gettext_lazy("Reach a zone"),
+        "fields": ["zone", "within_s"],
+        "help": gettext_lazy("The robot gets into the zone (the world's named area)."),
+    },
     "zones_in_order": {
         "label": gettext_lazy("Visit zones in order"),
         "fields": ["zones", "within_s"],
+        "help": gettext_lazy("The robot gets into each zone in turn, in this order."),
     },
-    "no_contact": {"label": gettext_lazy("Never touch a wall or box"), "fields": []},
+    "no_contact": {
+        "label": gettext_lazy("Never touch a wall or box"),
+        "fields": [],
+        "help": gettext_lazy("From start to end, the robot never touches a wall or a box."),
+    },
     "stop_near_wall": {
         "label": gettext_lazy("Stop near a wall"),
         "fields": ["min_m", "max_m"],
+        "help": gettext_lazy(
+            "At the end the robot stands still, and the gap between its body and the nearest"
+            " wall or box is in this band."
+        ),
     },
-    "ends_within": {"label": gettext_lazy("End on its own"), "fields": ["seconds"]},
+    "ends_within": {
+        "label": gettext_lazy("End on its own"),
+        "fields": ["seconds"],
+        "help": gettext_lazy(
+            "The program ends by itself without an error (not stopped, not at the time limit)."
+        ),
+    },
     "output_matches": {
         "label": gettext_lazy("Print or say a text"),
         "fields": ["pattern", "flags"],
+        "help": gettext_lazy("A line the program prints, or a text it says, matches the pattern."),
     },
-    "uses_block": {"label": gettext_lazy("Use a block (blocks)"), "fields": ["block"]},
-    "max_blocks": {"label": gettext_lazy("At most N blocks (blocks)"), "fields": ["count"]},
+    "uses_block": {
+        "label": gettext_lazy("Use a block (blocks)"),
+        "fields": ["block"],
+        "help": gettext_lazy("The blocks program uses this block: checked on the program itself."),
+    },
+    "max_blocks": {
+        "label": gettext_lazy("At most N blocks (blocks)"),
+        "fields": ["count"],
+        "help": gettext_lazy("The blocks program has at most this many blocks."),
+    },
 }
 
 #: A check's fields: label, input type (number, text, zone, zones, flag, block), whether it
@@ -56,7 +84,7 @@ CHECK_FIELDS: dict[str, dict] = {
         "type": "number",
         "optional": True,
         "step": "0.1",
-        "hint": gettext_lazy("sim seconds from the start; empty: any time"),
+        "hint": gettext_lazy("empty: any time"),
     },
     "min_m": {"label": gettext_lazy("gap from (m)"), "type": "number", "step": "0.01"},
     "max_m": {"label": gettext_lazy("gap to (m)"), "type": "number", "step": "0.01"},
@@ -409,6 +437,7 @@ def check_row(i, c: Check, errors: ErrorMap | None = None) -> dict:
     return {
         "index": i, "number": i + 1 if isinstance(i, int) else "", "c": c, "fields": fields,
         "kinds": [(kind, spec["label"]) for kind, spec in CHECK_KINDS.items()],
+        "helps": [(kind, spec["help"]) for kind, spec in CHECK_KINDS.items()],
         "known_kind": c.kind in CHECK_KINDS,
         "errors": {"kind": errors.claim(f"{at}.kind"), "points": errors.claim(f"{at}.points"),
                    "message": errors.claim(f"{at}.message")},

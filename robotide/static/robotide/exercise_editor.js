@@ -78,7 +78,7 @@
 
     function showKindFields(row) {
       var kind = row.querySelector("select.ex-kind").value;
-      row.querySelectorAll(".ex-kind-field").forEach(function (field) {
+      row.querySelectorAll(".ex-kind-field, .ex-kind-help").forEach(function (field) {
         var kinds = (field.dataset.kinds || "").split(" ");
         field.toggleAttribute("data-off", kinds.indexOf(kind) < 0);
       });
