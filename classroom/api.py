@@ -16,7 +16,7 @@ from ninja import Field, Query, Router, Schema
 from ninja.responses import Status
 from pydantic import BaseModel, ConfigDict, model_validator
 
-from classroom import documents, grades
+from classroom import checking, documents, grades
 from classroom.access import (
     attempts_for_user,
     can_edit_exercise,
@@ -29,6 +29,7 @@ from classroom.access import (
     sees_hidden,
 )
 from classroom.accounts import MAX_STUDENTS, AccountsError, Entry, create_class, create_students
+from classroom.checking import CheckRefused, start_attempt
 from classroom.documents import ExerciseError
 from classroom.models import Attempt, Classroom, Exercise
 from programs.access import get_program_for_user
@@ -365,8 +366,6 @@ class RecheckOut(Schema):
 @exercises_router.post("/{int:exercise_id}/recheck", response=RecheckOut)
 def recheck(request, exercise_id: int):
     """Every student's counted attempt checked under an older version is checked again."""
-    from classroom import checking
-
     exercise = _editable(request, exercise_id)
     return {"attempts": len(checking.recheck(exercise))}
 
@@ -441,8 +440,6 @@ def check(request, exercise_id: int, data: CheckIn):
     and is checked: 202 with the attempt, whose results come at ``GET /api/attempts/{id}``.
     403: the program is not yours; 409: a check of yours is still running; 422: a language
     this exercise does not take; 429: the server checks as many as it can at once."""
-    from classroom.checking import CheckRefused, start_attempt
-
     exercise = get_exercise_for_user(request.user, exercise_id)
     program = get_program_for_user(request.user, data.program)
     try:

@@ -18,6 +18,7 @@ from classroom.models import Attempt, AttemptRun, Exercise
 from programs.languages import BLOCKS_TEMPLATE
 from programs.models import Program
 from robotide.models import ApiToken, ClassTeacher
+from tests.classroom.test_checking import agents  # noqa: F401 - a fixture: embedded agents
 
 pytestmark = pytest.mark.django_db
 
@@ -178,6 +179,7 @@ def test_the_body_must_be_an_object(api):
 
 
 def test_version_bumps_when_what_decides_a_result_changes(api, school):
+    """And recheck (none checked yet here: nothing to check again)."""
     exercise = posted(api, "tina", kitchen(school["a"]))
     url = f"/api/exercises/{exercise['id']}"
 
@@ -200,6 +202,7 @@ def test_version_bumps_when_what_decides_a_result_changes(api, school):
     # An invalid save keeps it as it was.
     assert api["tina"]("PUT", url, {"variants": [HIDDEN]}).status_code == 422
     assert api["tina"]("GET", url).json()["version"] == 6
+    assert api["tina"]("POST", f"{url}/recheck").json() == {"attempts": 0}
 
 
 def test_a_student_never_reads_a_hidden_pose(api, school):
@@ -375,3 +378,70 @@ def test_a_check_of_a_blocks_exercise_through_the_api(api, school):
     assert api["alice"]("POST", url, {"program": plain.pk}).status_code == 404
     assert api["tina"]("POST", url, {"program": plain.pk}).status_code == 403
     assert Attempt.objects.count() == 2
+
+
+# -- a Check with runs, through the API ----------------------------------------------------------
+
+
+@pytest.mark.django_db(transaction=True)
+async def test_a_check_through_the_api_never_shows_a_hidden_pose(agents):  # noqa: F811
+    """A student's Check on check sims with real agents (the pipeline's fixture): 202, then
+    the attempt at GET /api/attempts/{id} until done; the hidden variant failed, said so
+    without its pose, and its run is not hers to read."""
+    from asgiref.sync import sync_to_async
+
+    from tests.classroom.test_checking import FIXED_TIME, NORTH
+    from tests.waiting import until
+
+    def setup():
+        tess = User.objects.create_user("tess")
+        group = Group.objects.create(name="class-7a")
+        ClassTeacher.objects.create(group=group, user=tess)
+        ben = User.objects.create_user("ben")
+        ben.groups.add(group)
+        return api_of(tess), api_of(ben), ben, group
+
+    teacher, student, ben, group = await sync_to_async(setup)()
+    hidden = {"x": -0.6123, "y": -0.6047, "theta": NORTH, "hidden": True}
+    document = {
+        "title": "kitchen", "world": "boxes", "class": group.pk, "speed": 2, "time_limit_s": 30,
+        "variants": [{"x": -0.5, "y": 0.0, "theta": NORTH, "hidden": False}, hidden],
+        "checks": [{"kind": "reach_zone", "zone": "kitchen", "points": 2}],
+    }  # fmt: skip
+    call = sync_to_async(lambda who, *args: who(*args))
+    exercise = (await call(teacher, "POST", "/api/exercises", document)).json()
+    mine = await sync_to_async(program_of)(ben, FIXED_TIME)
+    checked = await call(student, "POST", f"/api/exercises/{exercise['id']}/check",
+                         {"program": mine.pk})  # fmt: skip
+    assert checked.status_code == 202, checked.content
+    url = f"/api/attempts/{checked.json()['id']}"
+
+    async def finished():
+        response = await call(student, "GET", url)
+        return response if response.json()["state"] in ("done", "error") else None
+
+    response = await until(finished, timeout=180)
+    attempt = response.json()
+    assert attempt["state"] == "done", attempt
+    rows = {(r["check"], r["variant"]): r for r in attempt["results"]}
+    assert rows[(0, 0)]["passed"] and not rows[(0, 1)]["passed"], attempt["results"]
+    assert rows[(0, 1)]["why"].startswith("hidden variant 2: "), rows[(0, 1)]
+    assert attempt["score"] == 0 and not attempt["passed"]
+    assert [r["run"] is None for r in attempt["runs"]] == [False, True]
+    answers = [response, await call(student, "GET", f"/api/exercises/{exercise['id']}"),
+               await call(student, "GET", f"/api/exercises/{exercise['id']}/attempts")]  # fmt: skip
+    for answer in answers:
+        text = answer.content.decode()
+        assert not any(s in text for s in ("-0.6123", "-0.6047", "-0.61", "-0.60")), text
+    # Her teacher reads the hidden run; the student gets 404 for it.
+    theirs = (await call(teacher, "GET", url)).json()
+    sealed = theirs["runs"][1]["run"]
+    assert sealed is not None
+    assert (await call(student, "GET", f"/api/runs/{sealed}")).status_code == 404
+    assert (await call(teacher, "GET", f"/api/runs/{sealed}")).status_code == 200
+
+
+def program_of(owner, source: str) -> Program:
+    made = Program.objects.create(owner=owner, name="kitchen", language="python")
+    made.save_source(source, owner)
+    return made
