@@ -225,15 +225,16 @@ def finish(attempt: Attempt, exercise: Exercise) -> None:
     rows = sorted(
         attempt.results, key=lambda r: (r["check"], -1 if r["variant"] is None else r["variant"])
     )
-    score = 0.0
-    for i, check in enumerate(exercise.checks):
+    score, checks = 0.0, exercise.checks
+    for i, check in enumerate(checks):
         mine = [row for row in rows if row["check"] == i]
         if mine and all(row["passed"] for row in mine):
             score += float(check.get("points", 1))
     attempt.results = rows
     attempt.score = score
     attempt.max_score = exercise.max_score
-    attempt.passed = all(row["passed"] for row in rows)
+    judged = {row["check"] for row in rows}  # a check with no row (no variant) did not pass
+    attempt.passed = all(row["passed"] for row in rows) and judged == set(range(len(checks)))
     attempt.state = Attempt.State.DONE
     attempt.error = ""
     attempt.finished = timezone.now()
