@@ -429,12 +429,29 @@ def visible_variants(exercise: Exercise, user) -> list[dict]:
     ]
 
 
+#: What a student does not read of a check: an output pattern is often the answer itself (the
+#: landmark's name); the teacher's message says what to print instead.
+SECRET_KEYS = {"output_matches": ("pattern", "flags")}
+
+
+def visible_checks(exercise: Exercise, user) -> list[dict]:
+    """The checks as ``user`` may read them: whole for who may change the exercise, without
+    their secrets (SECRET_KEYS) for anyone else."""
+    if sees_hidden(user, exercise):
+        return [dict(c) for c in exercise.checks]
+    return [
+        {k: v for k, v in c.items() if k not in SECRET_KEYS.get(c.get("kind"), ())}
+        for c in exercise.checks
+    ]
+
+
 def document(exercise: Exercise, user) -> dict:
     """The exercise's document as ``user`` may read it (hidden poses stripped for students)."""
     return {
         "id": exercise.pk,
         **stored_document(exercise),
         "variants": visible_variants(exercise, user),
+        "checks": visible_checks(exercise, user),
         "version": exercise.version,
         "owner": exercise.owner.username,
         "created": exercise.created,

@@ -32,6 +32,7 @@ from classroom.access import (
     sees_hidden,
 )
 from classroom.checking import CheckRefused, counted_attempt, start_attempt
+from classroom.documents import visible_checks
 from classroom.models import Attempt, AttemptRun, Exercise, Work
 from classroom.templatetags.classroom_student import check_words, variant_name
 from programs.access import EDIT, READ, can
@@ -101,7 +102,7 @@ def exercise_detail(request: HttpRequest, pk: int) -> HttpResponse:
         "hidden_count": hidden,
         "checks": [
             {"words": check_words(check), "points": check.get("points", 1)}
-            for check in exercise.checks
+            for check in visible_checks(exercise, user)
         ],
         "languages": languages_in_words(exercise),
         "work": own_work(exercise, user),

@@ -445,3 +445,18 @@ def program_of(owner, source: str) -> Program:
     made = Program.objects.create(owner=owner, name="kitchen", language="python")
     made.save_source(source, owner)
     return made
+
+
+def test_a_student_never_reads_an_output_pattern(api, school, client):
+    """An output check's pattern is often the answer (the landmark's name): a student reads
+    that a text is asked for, never which; her teacher reads it."""
+    answer = {"kind": "output_matches", "pattern": "Kitchen-42", "message": "Say the room."}
+    exercise = posted(api, "tina", kitchen(school["a"], checks=[answer]))
+    url = f"/api/exercises/{exercise['id']}"
+    assert "Kitchen-42" not in api["alice"]("GET", url).content.decode()
+    assert "Kitchen-42" not in api["alice"]("GET", "/api/exercises").content.decode()
+    assert api["alice"]("GET", url).json()["checks"][0]["message"] == "Say the room."
+    assert api["tina"]("GET", url).json()["checks"][0]["pattern"] == "Kitchen-42"
+    client.force_login(school["alice"])
+    page = client.get(f"/exercises/{exercise['id']}/")
+    assert page.status_code == 200 and "Kitchen-42" not in page.content.decode()
