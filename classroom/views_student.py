@@ -463,15 +463,13 @@ def attempt_try(request: HttpRequest, pk: int) -> HttpResponse:
         messages.error(request, why)
         return redirect("attempt-detail", attempt.pk)
     program = attempt.program
+    if program.language != attempt.language:
+        messages.error(request, _("The program's language changed since this attempt."))
+        return redirect("attempt-detail", attempt.pk)
+    # The run is of the checked revision, whatever the program holds now.
     source = attempt.revision.source if attempt.revision_id else attempt.source
-    # The run is of the checked revision, whatever the program holds now: what it ran is
-    # what the run keeps (Run.create_for copies name, language and source).
-    as_checked = Program(
-        pk=program.pk, owner=program.owner, name=program.name, language=attempt.language,
-        source=source,
-    )  # fmt: skip
     try:
-        run = start_run(as_checked, robot, request.user)
+        run = start_run(program, robot, request.user, source=source)
     except (RunRefused, PermissionDenied) as exc:
         messages.error(request, str(exc))
         return redirect("attempt-detail", attempt.pk)

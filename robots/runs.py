@@ -17,9 +17,10 @@ from robots.models import Robot
 log = logging.getLogger(__name__)
 
 
-def start_run(program: Program, robot: Robot, user, args=()) -> Run:
+def start_run(program: Program, robot: Robot, user, args=(), source: str | None = None) -> Run:
     """Create the run and hand it to the robot's agent (which owns the process).
-    PermissionDenied if `user` may see the robot but not drive it."""
+    PermissionDenied if `user` may see the robot but not drive it. ``source``: what runs, if
+    not the program as saved (an exercise attempt's checked revision)."""
     if not robot.drivable_by(user):
         raise PermissionDenied(
             _("Only %(who)s may run programs on %(robot)s.")
@@ -36,7 +37,7 @@ def start_run(program: Program, robot: Robot, user, args=()) -> Run:
             _("%(language)s is not available on this robot computer (%(install)s).")
             % {"language": language.label, "install": language.install_hint}
         )
-    run = Run.create_for(program, robot, user, args)
+    run = Run.create_for(program, robot, user, args, source=source)
     message = {
         "run_id": run.pk,
         "language": run.language,
