@@ -17,9 +17,12 @@ from __future__ import annotations
 
 import math
 import re
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
+
+import regex  # matches that give up in time (the standard `re` cannot)
 
 from classroom import blocks_checks
 from classroom.trace import Trace
@@ -34,6 +37,7 @@ MAX_MESSAGE = 2000
 MAX_PATTERN = 500
 MAX_ZONES_IN_ORDER = 20
 MAX_MATCHED_CHARS = 2000  # of each output line: a pattern is searched in this much
+MATCH_SECONDS = 2.0  # an output check's matches together, at most
 BLOCK_TYPE = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,99}")
 
 
@@ -240,8 +244,8 @@ def _pattern(value: Any, where: str, world: World, _: Translate) -> str:
             % {"max": MAX_PATTERN},
         )
     try:
-        re.compile(value)
-    except re.error as exc:
+        regex.compile(value)
+    except regex.error as exc:
         raise CheckError(
             where, _("the pattern is not a valid regular expression: %(why)s") % {"why": exc}
         ) from None
@@ -500,10 +504,23 @@ def _ends_within(check: dict, trace: Trace, world: World, _: Translate) -> Outco
 
 
 def _output_matches(check: dict, trace: Trace, world: World, _: Translate) -> Outcome:
-    flags = re.IGNORECASE if check.get("flags") == "i" else 0
-    pattern = re.compile(check["pattern"], flags)
+    flags = regex.IGNORECASE if check.get("flags") == "i" else 0
+    pattern = regex.compile(check["pattern"], flags)
+    # A pattern that backtracks without end on what a program printed would hold the process
+    # that checks (the server's, embedded): the `regex` module's matches give up in time.
+    deadline = time.monotonic() + MATCH_SECONDS
     for t, source, text in trace.texts():
-        if pattern.search(text[:MAX_MATCHED_CHARS]):
+        try:
+            found = pattern.search(
+                text[:MAX_MATCHED_CHARS], timeout=max(deadline - time.monotonic(), 0.001)
+            )
+        except TimeoutError:
+            return Outcome(
+                False,
+                _("the check's pattern took more than %(seconds)s s to match the output: "
+                  "ask your teacher to simplify it") % {"seconds": f"{MATCH_SECONDS:g}"},
+            )  # fmt: skip
+        if found:
             if source == "said":
                 why = _("it said a matching text %(seconds)s s into the run")
             else:

@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 
 import rhal
+from classroom import checks as checks_module
 from classroom.checks import (
     STATIC_KINDS,
     CheckError,
@@ -424,6 +425,15 @@ async def test_output_matches_fails_when_nothing_matches_without_giving_the_patt
         "no output line or said text matched what the exercise expects (it printed 1 lines "
         "and said 0 texts)",
     )
+
+
+def test_output_matches_gives_up_on_a_pattern_that_backtracks_without_end(monkeypatch):
+    """A student's output against a teacher's catastrophic pattern (`re` takes hours on this
+    line) must not hold the process that checks: the check fails in time, saying why."""
+    monkeypatch.setattr(checks_module, "MATCH_SECONDS", 0.2)
+    trace = Trace.from_dict(hand_made(output=[[0.5, "a" * 60 + "b"]]))
+    outcome = judge(trace, kind="output_matches", pattern=r"^(a|aa)+$")
+    assert not outcome.passed and "took more than 0.2 s" in outcome.why
 
 
 # -- uses_block, max_blocks --------------------------------------------------------------------
