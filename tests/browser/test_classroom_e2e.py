@@ -7,11 +7,15 @@ passes the visible variant and fails a hidden one, and his checklist says why wi
 the hidden pose away. The teacher's grid shows both, and its CSV has both rows.
 
 The programs were chosen on an in-process sim (rhal.connect("sim://?world=boxes")) from these
-poses: the kitchen zone is x in [-1, 0], y in [1.4, 2.0] (its wall at y = 2, the robot's radius
-0.15 m). B drives 0.5 m/s for 3 s: from y = 0.1 (visible) and 0.05 (hidden 2) he ends 1.5 m
-further, in the kitchen, clear of the wall; from y = -1.15 (hidden 1) he ends at y = 0.35,
-nowhere near it. A slows down near the wall and stops with 0.45 m left to it (its centre at
-y = 1.55), from wherever she starts facing north on that side of the arena.
+poses: the kitchen zone is x in [-1, 0], y in [1.4, 2.0], its wall at y = 2 (the robot's radius
+is 0.15 m: it touches the wall with its centre at 1.85). B drives 0.2 m/s for 3 s of his
+clock: from y = 0.82 (the visible start and hidden start 3) he ends in the kitchen if his
+drive lasts 3 to 5.15 s (it cannot be shorter: his sleep begins once the drive answered), so
+a check sim's clock at speed 2 may be late by a whole real second and he still passes; from
+y = -1.15 (hidden start 2) he ends at y = -0.55, nowhere near it. A drives north until her
+range sensor reads 0.45 m (slowly for the last 0.45 m) and stops, her centre at y = 1.55:
+the same wherever she starts facing north, a stop 0.3 m (2 s of her slow speed) before a
+touch.
 """
 
 import csv
@@ -29,13 +33,14 @@ NEW_PASSWORDS = {"A": "ana-chose-this-9081", "B": "bruno-chose-this-4410"}
 TITLE = "Reach the kitchen without touching anything"
 TEXT = "Drive to the **kitchen** and stop there. Do not touch a wall or a box."
 NORTH = round(math.pi / 2, 4)
-VISIBLE = {"x": -0.5, "y": 0.1, "theta": NORTH, "hidden": False}
+VISIBLE = {"x": -0.5, "y": 0.82, "theta": NORTH, "hidden": False}
 HIDDEN = [
     {"x": -0.45, "y": -1.15, "theta": NORTH, "hidden": True},  # B ends far short of it
-    {"x": -0.75, "y": 0.05, "theta": NORTH, "hidden": True},  # B gets there too
+    {"x": -0.75, "y": 0.82, "theta": NORTH, "hidden": True},  # B gets there too
 ]
-# What would give a hidden pose away, in any text a student is shown
-HIDDEN_GIVEAWAYS = ["-0.45", "-1.15", "-0.75", "0.05"]
+SPEED = "2"  # the check sims' clock, x real time: B's 3 s may be a second late and still pass
+# What would give a hidden pose away, in any page a student is shown
+HIDDEN_GIVEAWAYS = ["-0.45", "-1.15", "-0.75"]
 CHECK_DEADLINE_MS = 180_000  # the attempt's state: a deadline for the event, not its time
 
 PROGRAM_A = """\
@@ -60,7 +65,7 @@ import time
 import robot
 
 bot = robot.Robot()
-bot.drive(0.5, 0.0)
+bot.drive(0.2, 0.0)
 time.sleep(3)
 bot.drive(0.0, 1.0)
 time.sleep(1.5)
@@ -152,6 +157,7 @@ def create_exercise(page: Page, group: int) -> int:
     untouched = check_row(page, 1)
     untouched.get_by_label("What").select_option("no_contact")
     untouched.get_by_label("Message students see").fill("Slow down before the wall.")
+    page.get_by_label("Check speed").fill(SPEED)
     page.get_by_label("Time limit of a run").fill("30")
     page.get_by_role("button", name="Save").first.click()
     expect(page).to_have_url(re.compile(r"/classroom/exercises/\d+/edit$"))
