@@ -41,6 +41,7 @@ from programs.languages import get_language
 from programs.models import Program
 from robots.models import Robot, robots_for_user
 from robots.runs import RunRefused, start_run
+from worlds.documents import BUILTIN_TITLES
 
 log = logging.getLogger(__name__)
 
@@ -91,6 +92,8 @@ def exercise_detail(request: HttpRequest, pk: int) -> HttpResponse:
     visible = [(i, v) for i, v in enumerate(exercise.variants) if not v.get("hidden")]
     hidden = len(exercise.variants) - len(visible)
     drawing = drawn_world(exercise)
+    if (title := drawing["world"].get("title")) in BUILTIN_TITLES:  # in the reader's language
+        drawing["world"]["title"] = _(title)
     drawing["starts"] = [
         {"x": v["x"], "y": v["y"], "theta": v["theta"], "label": str(i + 1)} for i, v in visible
     ]
