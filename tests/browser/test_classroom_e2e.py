@@ -189,7 +189,7 @@ def check_program(page: Page, exercise: int, source: str):
     page.locator("#start").click()
     expect(page).to_have_url(re.compile(r"/programs/\d+/$"))
     expect(page.locator("#exercise-bench")).to_contain_text(TITLE)
-    page.wait_for_function("window.robotideEditor !== undefined")
+    page.wait_for_function("() => window.robotideEditor !== undefined")
     set_editor_text(page, source)
     page.locator("#check-button").click()
     checklist = page.locator("#exercise-checklist .checklist")
