@@ -1,7 +1,7 @@
 """Exercises the portal checks (issue 31): Check to checklist, and 25 students checking at once.
 
     .venv/bin/python -m benchmarks.checks [--quick] [--modes embedded fleet] [--students 25]
-        [--repeats 3] [--sims-agents 1]
+        [--repeats 3] [--sims-agents 1] [--runs-at-once N] [--env NAME=VALUE ...]
 
 A 20-second exercise on the boxes world with 3 variants (start poses): the program drives a
 circle of 0.33 m for 20 s of its clock, reading sensors() 20 times a second, and ends; the
@@ -119,6 +119,8 @@ class Options:
     class_speed: float = 5
     calm: float = 8.0  # s of e-stops before the checks
     sims_agents: int = 1  # fleet: `robotide agent --personal-sims` processes
+    runs_at_once: int | None = None  # CHECK_RUNS_AT_ONCE (None: the default, 2 x CPUs)
+    env: dict = field(default_factory=dict)  # more settings for the appliance
     quick: bool = False
 
 
@@ -133,6 +135,11 @@ def options_from(argv: list[str] | None) -> Options:
         "--sims-agents", type=int, default=1,
         help="fleet: personal sims' agent processes (the docs say one a fleet)",
     )  # fmt: skip
+    parser.add_argument("--runs-at-once", type=int, help="CHECK_RUNS_AT_ONCE (2 x CPUs)")
+    parser.add_argument(
+        "--env", action="append", default=[], metavar="NAME=VALUE",
+        help="a setting for the appliance, e.g. ROBOTIDE_RUNS_PER_USER=3",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     options = Options()
     if args.quick or os.environ.get("CHECKS_BENCH_QUICK"):
@@ -144,6 +151,8 @@ def options_from(argv: list[str] | None) -> Options:
     if args.repeats:
         options.repeats = args.repeats
     options.sims_agents = args.sims_agents
+    options.runs_at_once = args.runs_at_once
+    options.env = dict(item.split("=", 1) for item in args.env)
     return options
 
 
@@ -153,11 +162,12 @@ def options_from(argv: list[str] | None) -> Options:
 class Setup:
     """A started appliance (embedded or fleet) and the processes whose CPU and memory count."""
 
-    def __init__(self, mode: str, sims_agents: int = 1):
+    def __init__(self, mode: str, sims_agents: int = 1, env: dict | None = None):
         self.mode, self.sims_agents = mode, sims_agents
         self.data = Path(tempfile.mkdtemp(prefix=f"robotide-bench-checks-{mode}-"))
         self.data.chmod(0o711)
-        self.app = Appliance(self.data, mode="embedded" if mode == "embedded" else "split")
+        split = "embedded" if mode == "embedded" else "split"
+        self.app = Appliance(self.data, mode=split, extra_env=env)
         self.agents: list = []  # fleet: the personal (and check) sims' agent processes
 
     def __enter__(self) -> Setup:
@@ -562,7 +572,10 @@ def pct(values: list[float], p: float) -> float | None:
 
 def measure(mode: str, options: Options) -> list[Figure]:
     say(f"== {BENCH}: {mode}")
-    with Setup(mode, options.sims_agents) as setup, admin(setup.app) as teacher:
+    env = dict(options.env)
+    if options.runs_at_once:
+        env["ROBOTIDE_CHECK_RUNS_AT_ONCE"] = str(options.runs_at_once)
+    with Setup(mode, options.sims_agents, env) as setup, admin(setup.app) as teacher:
         group, tokens = make_class(setup.app, teacher, options.students)
         figures = []
         for part in (alone, at_once):
@@ -579,7 +592,10 @@ def run(argv: list[str] | None = None) -> list[Figure]:
     options = options_from(argv)
     load = os.getloadavg()
     say(f"{BENCH}: {os.cpu_count()} CPUs, load {load[0]:.2f}; modes {', '.join(options.modes)};"
-        f" {options.students} students; speeds {options.speeds} x {options.repeats}")  # fmt: skip
+        f" {options.students} students; speeds {options.speeds} x {options.repeats};"
+        f" check runs at once {options.runs_at_once or 'default'};"
+        f" personal sims' agents (fleet) {options.sims_agents};"
+        f" settings {options.env}")  # fmt: skip
     figures = []
     for mode in options.modes:
         try:
