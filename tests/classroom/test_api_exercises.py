@@ -18,7 +18,6 @@ from classroom.models import Attempt, AttemptRun, Exercise
 from programs.languages import BLOCKS_TEMPLATE
 from programs.models import Program
 from robotide.models import ApiToken, ClassTeacher
-from tests.classroom.test_checking import agents  # noqa: F401 - a fixture: embedded agents
 
 pytestmark = pytest.mark.django_db
 
@@ -384,7 +383,7 @@ def test_a_check_of_a_blocks_exercise_through_the_api(api, school):
 
 
 @pytest.mark.django_db(transaction=True)
-async def test_a_check_through_the_api_never_shows_a_hidden_pose(agents):  # noqa: F811
+async def test_a_check_through_the_api_never_shows_a_hidden_pose(agents):
     """A student's Check on check sims with real agents (the pipeline's fixture): 202, then
     the attempt at GET /api/attempts/{id} until done; the hidden variant failed, said so
     without its pose, and its run is not hers to read."""

@@ -15,7 +15,6 @@ import math
 
 import pytest
 from asgiref.sync import sync_to_async
-from channels.layers import get_channel_layer
 from django.contrib.auth.models import Group, User
 from django.test import Client
 
@@ -116,18 +115,6 @@ async def done(attempt: Attempt, timeout: float = 180.0) -> Attempt:
 
 def live_check_sims() -> int:
     return Robot.objects.filter(checking=True, reaped__isnull=True).count()
-
-
-@pytest.fixture
-async def agents():
-    """Embedded mode's agents: one per robot, the check sims' started as they are made."""
-    from robots.agent import AgentManager
-
-    await get_channel_layer().flush()
-    manager = AgentManager()
-    await manager.start()
-    yield manager
-    await manager.shutdown()
 
 
 def by_check_and_variant(attempt: Attempt) -> dict:
