@@ -525,10 +525,12 @@ if SIMS_PER_USER < 0 or SIMS_MAX < 0 or SIM_IDLE_MINUTES <= 0:
 # -- Checking an exercise (classroom.checking, robots.check_sims): each variant's run has a
 # fresh sim of its own, at most CHECK_SIMS_MAX of them at once on the server (a Check beyond
 # it is refused, saying to try again); of their runs, at most CHECK_RUNS_AT_ONCE go at once
-# (robots.fair_shares; default twice the CPUs: a check sim runs faster than real time and its
-# program as fast as it can), the others wait queued, their reason saying so.
+# (robots.fair_shares), the others wait queued, their reason saying so. Default: the CPUs.
+# A check sim runs faster than real time, so a reply late on a busy machine is late in the
+# sim by the speed's factor: with about a CPU a check run, a result depends little on how
+# many classmates press Check at the same moment (docs/classroom.md).
 CHECK_SIMS_MAX = env_int("ROBOTIDE_CHECK_SIMS_MAX", 100)
-CHECK_RUNS_AT_ONCE = env_int("ROBOTIDE_CHECK_RUNS_AT_ONCE", 2 * (os.cpu_count() or 1))
+CHECK_RUNS_AT_ONCE = env_int("ROBOTIDE_CHECK_RUNS_AT_ONCE", os.cpu_count() or 1)
 if CHECK_SIMS_MAX < 1 or CHECK_RUNS_AT_ONCE < 1:
     raise ValueError("ROBOTIDE_CHECK_SIMS_MAX and ROBOTIDE_CHECK_RUNS_AT_ONCE must be 1 or more")
 # -- All runs together (runbox.share): their parent cgroup's memory (a share of the RAM or of
