@@ -163,6 +163,8 @@ def create_exercise(page: Page, group: int) -> int:
     expect(page).to_have_url(re.compile(r"/classroom/exercises/\d+/edit$"))
     expect(page.locator(".messages")).to_contain_text("Saved")
     page.screenshot(path=f"{SHOTS}/classroom-e2e-exercise.png", full_page=True)
+    html = page.content()  # the teacher's: what a leak would look like, so its absence counts
+    assert all(giveaway in html for giveaway in HIDDEN_GIVEAWAYS), HIDDEN_GIVEAWAYS
     return int(re.search(r"/exercises/(\d+)/edit$", page.url).group(1))
 
 
@@ -186,6 +188,7 @@ def check_program(page: Page, exercise: int, source: str):
     expect(page).to_have_url(re.compile(rf"/exercises/{exercise}/$"))
     expect(page.locator("h1")).to_have_text(TITLE)
     expect(page.locator("#hidden-count")).to_contain_text("2 hidden start poses")
+    assert_no_hidden_pose(page, "the exercise's page")
     page.locator("#start").click()
     expect(page).to_have_url(re.compile(r"/programs/\d+/$"))
     expect(page.locator("#exercise-bench")).to_contain_text(TITLE)
