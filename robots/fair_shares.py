@@ -4,7 +4,9 @@ A user has at most ``RUNS_PER_USER`` runs going on all robots together (staff:
 ``RUNS_PER_STAFF``; 0: no limit), and a robot runs at most its ``settings.runs_at_once``
 programs, whoever's, and never more than its agent's isolation allows at once (a rootless box
 without a run-wide cgroup: one). The runs of exercises' checks (runs on check sims,
-robots.check_sims) go at most ``CHECK_RUNS_AT_ONCE`` at once on the whole server, whoever's.
+robots.check_sims) go at most ``CHECK_RUNS_AT_ONCE`` at once on the whole server, whoever's,
+and neither count towards nor wait for their owner's ``RUNS_PER_USER`` (a student has one
+Check going at most; its variants' runs go together).
 A run beyond a limit waits ``queued`` in its robot's queue (robots.run_queue) with the reason
 in its ``reason``, shown on its page, the robot's page and in the API; when a run ends, the
 agents holding runs that waited for it look again.
@@ -142,7 +144,10 @@ def admit(run_id: int, box_cap: int | None = None) -> Decision:
             return Decision(Admission.GONE)
         if not queued and run.started is not None:
             return Decision(Admission.ADMITTED)  # admitted already: its claim decides the rest
-        reason = _over_limit(run, user_limit(owner), robot_limit(robot, box_cap))
+        # A check run is paced by the server's count alone: its student has one Check going
+        # at most (classroom.checking), and its variants' runs go together, not in turns.
+        per_user = None if checking else user_limit(owner)
+        reason = _over_limit(run, per_user, robot_limit(robot, box_cap))
         if reason is None and checking:
             reason = _over_check_limit(run)
         if reason is None:
@@ -160,7 +165,9 @@ def _over_limit(run: Run, per_user: int | None, per_robot: int | None) -> str | 
     """Why ``run`` may not start now, or None."""
     if per_user is None and per_robot is None:
         return None
-    mine, robots = models.Q(owner_id=run.owner_id), models.Q(robot_id=run.robot_id)
+    # A user's own runs, not their checks' (counted apart: _over_check_limit)
+    mine = models.Q(owner_id=run.owner_id, robot__checking=False)
+    robots = models.Q(robot_id=run.robot_id)
     counts = (
         Run.objects.filter(going() & (mine | robots))
         .exclude(pk=run.pk)

@@ -305,6 +305,36 @@ async def test_check_runs_beyond_the_servers_cap_wait_queued_saying_why(agents, 
     assert attempt.passed and attempt.score == 1.0, attempt.results
 
 
+@pytest.mark.django_db(transaction=True)
+async def test_a_checks_variants_run_together_whatever_the_students_own_run_limit(agents, settings):
+    """A Check's runs are paced by the server's count, not by its student's RUNS_PER_USER:
+    with a limit of 1 run a student, the three variants still run at once (they took three
+    rounds: a Check of a 20 s exercise took three times 20 s)."""
+    settings.RUNS_PER_USER, settings.CHECK_RUNS_AT_ONCE = 1, 3
+    tess, (ana,), group = await sync_to_async(make_class)(["ana"])
+    exercise = await sync_to_async(make_exercise)(tess, group, checks=CHECKS[1:])
+    holds = await sync_to_async(program)(ana, HOLDS)
+    attempt = await sync_to_async(checking.start_attempt)(exercise, holds, ana)
+
+    async def settled():
+        runs = await sync_to_async(
+            lambda: list(Run.objects.filter(attempt_runs__attempt=attempt))
+        )()
+        waiting = [run.reason for run in runs if run.reason.startswith("waiting: ")]
+        return waiting or sorted(run.state for run in runs) == ["running"] * 3
+
+    assert await until(settled, timeout=120) is True, "a variant waited for a share"
+    ids = set(await sync_to_async(lambda: [ar.run_id for ar in attempt.runs.all()])())
+    for _ in ids:
+        agent, run_id = await until(lambda: _one_running(agents, ids), timeout=120)
+        active = agent.runs[run_id]
+        await until(lambda a=active: a.process.box.folder and a.process.box.folder.is_dir(), 60)
+        (active.process.box.folder / "done").write_text("")
+        await until(lambda a=agent, r=run_id: r not in a.runs, timeout=60)
+    attempt = await done(attempt)
+    assert attempt.passed, attempt.results
+
+
 async def _states_are(states, expected) -> bool:
     return (await states())[0] == expected
 
