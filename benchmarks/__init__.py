@@ -24,4 +24,5 @@ BENCHMARKS = (
     "classroom",
     "sims",
     "sim_view",
+    "checks",
 )
