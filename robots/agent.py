@@ -123,6 +123,12 @@ class ActiveRun:
                 pass
         return self.confirmed_now()
 
+    def signed_in(self) -> None:
+        """Its program signed in on the Robot API (robots.robot_api's auth): a check run's
+        trace and time limit count from its first sign-in, not its launch (TraceRecorder)."""
+        if self.trace is not None:
+            self.trace.signed_in()
+
     def disowned(self) -> bool:
         """Its claim was answered no: it was lost or failed meanwhile, its end is not ours
         to record (a claim that could not be asked is no answer)."""
@@ -558,14 +564,16 @@ class RobotAgent:
         if self.lease.estopped:  # pressed while its start was decided (its share's admission)
             return "stopped", "emergency stop"
         await self.starts.before_run(run_id)  # at the start pose, if it is to start there
-        if active is not None and active.trace is not None:  # its trace begins there
+        # Its trace begins there, and again when its program signs in (ActiveRun.signed_in).
+        if active is not None and active.trace is not None:
             active.trace.start()
             limit = self._time_limit(active)
             active.limit = asyncio.create_task(limit, name=f"run-{run_id}-limit")
         return None
 
     async def _time_limit(self, active: ActiveRun) -> None:
-        """A check run is stopped when its sim time is up, its trace ending there."""
+        """A check run is stopped when its sim time is up, its trace ending there: counted
+        from its program's first sign-in on the Robot API, until then from its launch."""
         speed = max(float(getattr(self.driver, "speed", 1.0) or 1.0), 0.01)
         while active.run_id in self.runs:
             left = active.trace.left()

@@ -185,12 +185,21 @@ class TraceRecorder:
     """One check run's trace, as its agent records it: the sim driver's (``start_trace`` once
     the robot stands at the start pose, ``take_trace`` at the end or at the time limit), the
     program's output lines at the sim's time, and how the run ended (classroom.trace reads
-    it). Plain Python: nothing here waits."""
+    it). Plain Python: nothing here waits.
+
+    Its time 0, and its time limit's, is when the program first signs in on the Robot API
+    (``signed_in``), not its launch: its interpreter's start (its box, its imports) takes
+    real time, which a sim faster than real time multiplies, and a busy server more of it.
+    The robot stands still until then (no drive without signing in), so the recording begun
+    at the launch is begun afresh there, and the lines printed before get time 0. A program
+    that never signs in (one that only prints) keeps the launch as its time 0: its time limit
+    counts from there."""
 
     def __init__(self, driver, time_limit_s: float | None):
         self.driver = driver
         self.time_limit_s = time_limit_s
-        self.started = False
+        self.started = False  # recording, from the launch at first
+        self.signed = False  # from its program's first sign-in on the Robot API (signed_in)
         self.taken: dict | None = None
         self.end_t = 0.0
         self.output: list[list] = []
@@ -203,8 +212,20 @@ class TraceRecorder:
         return callable(getattr(driver, "start_trace", None))
 
     def start(self) -> None:
+        """Its program is about to be launched (the robot at its start pose)."""
         self.driver.start_trace()
         self.started = True
+
+    def signed_in(self) -> None:
+        """Its program signed in on the Robot API: the first time, the trace and its time
+        limit begin again now (the robot has not moved: nothing drives it without signing
+        in); the output so far is at time 0."""
+        if not self.started or self.signed or self.taken is not None:
+            return
+        self.signed = True
+        self.driver.start_trace()
+        for line in self.output:
+            line[0] = 0.0
 
     def now(self) -> float:
         return self.driver.trace_time()

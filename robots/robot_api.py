@@ -145,6 +145,7 @@ class RobotApi:
         if session.run is not None:  # its subscriptions and caps are that run's
             raise RpcError(INVALID_REQUEST, "this connection is signed in already")
         session.run = active
+        active.signed_in()  # a check run's trace begins here (robots.check_sims)
         return {"robot": self.agent.name, "run": active.run_id}
 
     async def drive(self, active, params):

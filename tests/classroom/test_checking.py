@@ -67,6 +67,16 @@ print('going', flush=True)
 while not os.path.exists(os.path.expanduser('~/done')):
     time.sleep(0.05)
 """
+# Sleeps 30 s of its clock (the sim's: 3 real s at 10x) before it signs in on the Robot API,
+# as a slow start would (a busy server's box, its interpreter's imports), then ends at once.
+SLOW_START = """\
+import time
+print("starting", flush=True)
+time.sleep(30)
+import robot
+robot.Robot()
+print("signed in", flush=True)
+"""
 DONE = Attempt.State.DONE
 
 
@@ -197,6 +207,33 @@ async def test_a_program_stopped_at_the_time_limit_fails_ends_within(agents):
     assert trace["end"]["time_limit"] and trace["end"]["state"] == "stopped", trace["end"]
     assert 5.0 <= trace["end"]["t"] < 8.0, trace["end"]
     assert run.reason.startswith("time limit reached: 5 s of sim time"), run.reason
+
+
+@pytest.mark.django_db(transaction=True)
+async def test_a_check_runs_time_counts_from_its_programs_sign_in_not_its_launch(agents):
+    """What a program does before it first signs in on the Robot API (its box's and its
+    interpreter's start: real time, which a sim faster than real time multiplies) is not in its
+    trace's time nor its time limit's: the robot cannot move before. This one starts 30 s of
+    sim time before it signs in, then ends at once: within 20 s, and its lines printed before
+    are at time 0. (Before, the trace began before its launch: it ended 30 s late or more.)"""
+    tess, (ana,), group = await sync_to_async(make_class)(["ana"])
+    exercise = await sync_to_async(make_exercise)(
+        tess, group, variants=VARIANTS[:1], time_limit_s=90.0,
+        checks=[{"kind": "ends_within", "seconds": 20, "points": 1, "message": ""},
+                {"kind": "output_matches", "pattern": "^signed in$", "points": 1,
+                 "message": ""}],
+    )  # fmt: skip
+    slow = await sync_to_async(program)(ana, SLOW_START)
+    attempt = await done(await sync_to_async(checking.start_attempt)(exercise, slow, ana))
+    run = await sync_to_async(lambda: attempt.runs.get().run)()
+    trace = json.loads((run.directory / "trace.json").read_text())
+    assert attempt.passed and attempt.score == 2.0, (attempt.results, trace["end"])
+    assert trace["end"]["state"] == "finished" and not trace["end"]["time_limit"], trace["end"]
+    assert trace["end"]["t"] < 20.0, trace["end"]
+    starting, signed = trace["output"]
+    assert starting == [0, "starting"], trace["output"]
+    assert signed[1] == "signed in" and signed[0] <= trace["end"]["t"], trace["output"]
+    assert trace["start"]["y"] == pytest.approx(0.0) and trace["poses"][0][0] == 0, trace
 
 
 # -- refusals ----------------------------------------------------------------------------------
