@@ -4,9 +4,10 @@ robotide up [--bind HOST:PORT]   migrate, set up, serve (web + agents in one pro
                                  REDIS_URL is set: then the web tier only)
 robotide robots online [--here] [NAME...]
                                  exit 0 if the robots' agents beat lately (a health check)
-robotide agent NAME... [--url URL] [--sim N]
+robotide agent NAME... [--url URL] [--sim N] [--personal-sims] [--no-standby]
                                  run robots' agents (fleet mode): those named (one registered
-                                 with --url if new) and N simulated ones, sim-1 to sim-N
+                                 with --url if new) and N simulated ones, sim-1 to sim-N; one
+                                 process each: a second stands by (or exits) while one serves
 robotide token USERNAME          print a new API token for a user
 robotide robots detect [--json]  list serial ports and USB devices that look like robots
 robotide export USERNAME [-o FILE]
@@ -82,6 +83,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--personal-sims", action="store_true",
         help="also serve users' personal sims (made and removed while it runs) and remove "
         "idle ones: one such agent process per fleet",
+    )  # fmt: skip
+    agent.add_argument(
+        "--no-standby", dest="standby", action="store_false",
+        help="exit (code 3) if another process serves one of these robots (or the personal "
+        "sims), instead of standing by to take over when it ends (3 too if its lock is lost)",
     )  # fmt: skip
     token = commands.add_parser("token", help="print a new API token for a user")
     token.add_argument("username")
@@ -539,8 +545,8 @@ def cmd_agent(args, rest) -> int:
               " add it in the admin, POST /api/robots, or give --url", file=sys.stderr)  # fmt: skip
         return 2
     protect_data_dir()
-    asyncio.run(run_agents(names, personal_sims=args.personal_sims))
-    return 0
+    served = asyncio.run(run_agents(names, personal_sims=args.personal_sims, standby=args.standby))
+    return 0 if served else 3
 
 
 def cmd_online(args, rest) -> int:
@@ -580,27 +586,61 @@ def register_robot(name: str, url: str) -> None:
               " (change it on its page)", file=sys.stderr)  # fmt: skip
 
 
-async def run_agents(names: list[str], personal_sims: bool = False) -> None:
+async def run_agents(names: list[str], personal_sims: bool = False, standby: bool = True) -> bool:
     """Each robot's agent, until SIGTERM or SIGINT; one that fails is started again. With
-    ``personal_sims``, the personal sims' too, and their reaper (robots.sims)."""
+    ``personal_sims``, the personal sims' too, and their reaper (robots.sims). Each robot (and
+    the personal sims) only once its lock is this process's (robots.agent_lock): while another
+    process serves it, this one stands by, or, not ``standby``, returns False at once (and
+    False if its locks' database connection failed: another may serve them now)."""
+    from robots import agent_lock
     from robots.agent import AgentManager
 
+    def said(text: str) -> None:
+        print(f"robotide agent: {text}", file=sys.stderr, flush=True)
+
     manager = AgentManager()
-    for name in names:
-        manager.start_agent(name)
-    if personal_sims:
-        await manager.start(personal_only=True)
-        names = [*names, "personal sims"]
+    parts = [*names, *([agent_lock.PERSONAL_SIMS] if personal_sims else [])]
+    locks = agent_lock.agent_locks()
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
-    settle_heap()
-    print(f"robotide agent for {', '.join(names)} running", flush=True)
+
+    async def serve(part: str) -> None:
+        await agent_lock.take(locks, part, standby, said)
+        if part == agent_lock.PERSONAL_SIMS:
+            await manager.start(personal_only=True)
+        else:
+            manager.start_agent(part)
+
+    async def serve_all() -> None:
+        await asyncio.gather(*(serve(part) for part in parts))
+        settle_heap()
+        print(f"robotide agent for {', '.join(parts)} running", flush=True)
+
+    def ended(task: asyncio.Task) -> None:
+        if not task.cancelled() and task.exception() is not None:
+            stop.set()
+
+    serving = asyncio.create_task(serve_all())
+    watching = asyncio.create_task(locks.watch())
+    for task in (serving, watching):
+        task.add_done_callback(ended)
     try:
         await stop.wait()
     finally:
+        for task in (serving, watching):
+            task.cancel()
+        outcomes = await asyncio.gather(serving, watching, return_exceptions=True)
         await manager.shutdown()
+        await locks.close()  # after its agents ended: a standby takes over only then
+    failed = [exc for exc in outcomes if isinstance(exc, Exception)]
+    for exc in failed:
+        if isinstance(exc, agent_lock.LockLost):
+            said(f"{exc}; stopped, so that no two processes serve the same robots")
+        elif not isinstance(exc, agent_lock.Refused):
+            raise exc
+    return not failed
 
 
 def cmd_token(args, rest) -> int:

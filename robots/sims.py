@@ -20,7 +20,8 @@ start pose (``start_each_run``).
 
 Where the reaper runs: in embedded mode, in the web process, beside the agents
 (robots.agent.AgentManager.start); in fleet mode, in ``robotide agent --personal-sims``, the
-process that also runs the personal sims' agents (one such process per fleet).
+process that also runs the personal sims' agents (one such process per fleet: a second stands
+by until the first ends, robots.agent_lock).
 """
 
 from __future__ import annotations
