@@ -178,7 +178,8 @@ class Setup:
                     self.app._spawn("agent", "--personal-sims") for _ in range(self.sims_agents)
                 ]
                 deadline = time.monotonic() + 120
-                while not all("running" in log.read_text() for log in self.agent_logs()):
+                # The first serves; any other stands by (robots.agent_lock: one a fleet)
+                while not self._agents_up():
                     if time.monotonic() > deadline or self.app._ended():
                         raise RuntimeError("the personal sims' agents did not come up")
                     time.sleep(0.2)
@@ -188,6 +189,10 @@ class Setup:
             shutil.rmtree(self.data, ignore_errors=True)
             raise
         return self
+
+    def _agents_up(self) -> bool:
+        first, *others = [log.read_text() for log in self.agent_logs()]
+        return "running" in first and all("standing by" in log for log in others)
 
     def agent_logs(self) -> list[Path]:
         return [self.data / f"agent-{self.app.processes.index(p)}.log" for p in self.agents]
