@@ -31,7 +31,7 @@ import re
 import unicodedata
 
 from django.utils.translation import gettext as _
-from django.utils.translation import gettext_lazy as _lazy
+from django.utils.translation import gettext_lazy
 
 __all__ = [
     "BlocksError",
@@ -251,12 +251,14 @@ def _count(state: dict, key: str) -> int:
 
 
 # What _measure says of the block past a cap.
-ONE_BLOCKS_ELSE_IFS = _lazy(
+ONE_BLOCKS_ELSE_IFS = gettext_lazy(
     "%(block)s has %(count)s else-if branches; an if block may have at most %(most)s."
 )
-ONE_BLOCKS_ITEMS = _lazy("%(block)s has %(count)s items; a block may have at most %(most)s.")
-ALL_BRANCHES = _lazy("%(block)s takes this program past %(most)s else-if and else branches in all.")
-ALL_ITEMS = _lazy("%(block)s takes this program past %(most)s items in all.")
+ONE_BLOCKS_ITEMS = gettext_lazy("%(block)s has %(count)s items; a block may have at most %(most)s.")
+ALL_BRANCHES = gettext_lazy(
+    "%(block)s takes this program past %(most)s else-if and else branches in all."
+)
+ALL_ITEMS = gettext_lazy("%(block)s takes this program past %(most)s items in all.")
 
 
 def _refuse_past(block: dict, count: int, most: int, message) -> None:

@@ -28,7 +28,7 @@ from channels.layers import get_channel_layer
 from django.core.exceptions import PermissionDenied
 from django.db import transaction
 from django.utils.translation import gettext as _
-from django.utils.translation import gettext_lazy as _lazy
+from django.utils.translation import gettext_lazy
 
 from programs.models import Run
 from robots import run_queue
@@ -42,7 +42,7 @@ from robots.bus import (
 from robots.models import Robot, RobotStop, robot_group
 
 log = logging.getLogger(__name__)
-WHO_RESUMES = _lazy("staff, the robot's owner or whoever pressed it")  # the words everywhere
+WHO_RESUMES = gettext_lazy("staff, the robot's owner or whoever pressed it")  # the words everywhere
 
 
 def press(user, robot: Robot, via: str) -> RobotStop:
