@@ -22,7 +22,8 @@ from classroom import checking
 from classroom.models import Attempt, AttemptRun, Exercise
 from programs.models import Program, Run
 from robotide.models import ClassTeacher
-from robots import fair_shares
+from robots import fair_shares, stops
+from robots.bus import announce_robot
 from robots.models import Robot
 from tests.waiting import until
 from worlds.documents import builtin_worlds
@@ -121,6 +122,13 @@ async def done(attempt: Attempt, timeout: float = 180.0) -> Attempt:
     await until(finished, timeout=timeout)
     assert attempt.state == DONE, (attempt.state, attempt.error)
     return attempt
+
+
+def tess_as_staff(tess):
+    """The teacher, staff for the lab robot's stop (its default: staff and its owner)."""
+    tess.is_staff = True
+    tess.save(update_fields=["is_staff"])
+    return tess
 
 
 def live_check_sims() -> int:
@@ -391,17 +399,25 @@ def _one_running(manager, run_ids: set[int]):
 @pytest.mark.django_db(transaction=True)
 async def test_25_students_checks_submitted_at_once_all_complete(agents, settings):
     """25 Checks at once (one variant each, speed 10, a tiny program): every attempt recorded
-    and judged, none lost, every check sim gone after."""
+    and judged, none lost, every check sim gone after; meanwhile the lab's real robot (a
+    shared robot, not a check sim) still answers its emergency stop."""
     tess, students, group = await sync_to_async(make_class)(25)
     exercise = await sync_to_async(make_exercise)(
         tess, group, variants=VARIANTS[:1], checks=CHECKS[1:]
     )
+    lab = await sync_to_async(Robot.objects.create)(name="lab", url="sim://")
+    await announce_robot("lab")
+    await until(lambda: "lab" in agents.agents, timeout=60)
     programs = [await sync_to_async(program)(s, "print('hi')\n") for s in students]
     # Asked together, as a web server's sync views run them: one after the other on its thread
     start = sync_to_async(checking.start_attempt)
     attempts = await asyncio.gather(
         *(start(exercise, p, s) for p, s in zip(programs, students, strict=True))
     )
+    staff = await sync_to_async(tess_as_staff)(tess)
+    pressed = await sync_to_async(stops.press)(staff, lab, "test")
+    assert agents.agents["lab"][0].lease.estopped, "the lab robot's e-stop did not hold"
+    assert pressed.kind == "estop"
     finished = [await done(attempt, timeout=600) for attempt in attempts]
     assert all(a.passed and a.score == 1.0 for a in finished), [a.results for a in finished]
     count = sync_to_async(lambda: Attempt.objects.filter(exercise=exercise, state=DONE).count())
