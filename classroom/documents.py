@@ -32,6 +32,7 @@ from django.utils.translation import gettext as _
 from classroom.access import can_edit_exercise, can_set_for_class, sees_hidden
 from classroom.models import Exercise
 from programs.languages import LANGUAGES
+from worlds.documents import DocumentError
 
 MAX_TITLE = 200
 MAX_TEXT = 20_000
@@ -53,26 +54,11 @@ KNOWN = set(DEFAULTS) | {"title", "world", "variants"} | READ_ONLY
 DECISIVE = ("world_document", "variants", "checks", "time_limit_s", "speed")
 
 
-class ExerciseError(ValueError):
+class ExerciseError(DocumentError):
     """An exercise document that cannot be saved: where (``path``, "" for the whole), what is
-    wrong, and the HTTP status that says it."""
+    wrong, and the HTTP status that says it (as a world document's error, worlds.documents)."""
 
-    def __init__(self, message: str, path: str = "", status: int = 422):
-        super().__init__(message)
-        self.path = path
-        self.status = status
-
-    def as_detail(self) -> list[dict]:
-        """As the API's other validation errors are (pydantic's list), with the path too."""
-        return [
-            {"type": "exercise", "loc": ["body", *path_parts(self.path)], "path": self.path,
-             "msg": str(self)}
-        ]  # fmt: skip
-
-
-def path_parts(path: str) -> list:
-    """``"variants[2].x"`` -> ``["variants", 2, "x"]``."""
-    return [int(p) if p.isdigit() else p for p in re.findall(r"[^.\[\]]+", path)]
+    kind = "exercise"
 
 
 # -- reading a document ------------------------------------------------------------------------

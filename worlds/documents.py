@@ -15,6 +15,8 @@ class DocumentError(ValueError):
     """A document that cannot be stored: ``path`` in it (e.g. ``"walls[2].to"``, "" for the
     whole), what is wrong, and the HTTP status that says it (413 too large, 422 invalid)."""
 
+    kind = "world"  # the error's "type" in the API (classroom's exercises say "exercise")
+
     def __init__(self, message: str, path: str = "", status: int = 422):
         super().__init__(message)
         self.path = path
@@ -23,7 +25,7 @@ class DocumentError(ValueError):
     def as_detail(self) -> list[dict]:
         """As the API's other validation errors are (pydantic's list), with the path too."""
         return [
-            {"type": "world", "loc": ["body", *path_parts(self.path)], "path": self.path,
+            {"type": self.kind, "loc": ["body", *path_parts(self.path)], "path": self.path,
              "msg": str(self)}
         ]  # fmt: skip
 
