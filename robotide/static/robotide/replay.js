@@ -235,23 +235,7 @@
   };
 
   function drawStart(ctx, x, y, theta, r, label) {
-    ctx.save();
-    ctx.translate(x, y);
-    ctx.rotate(-theta);
-    ctx.strokeStyle = COLOURS.start;
-    ctx.lineWidth = 1.5;
-    ctx.setLineDash([3, 3]);
-    ctx.beginPath();
-    ctx.arc(0, 0, r, 0, 2 * Math.PI);
-    ctx.stroke();
-    ctx.setLineDash([]);
-    ctx.beginPath();
-    ctx.moveTo(r * 0.9, 0);
-    ctx.lineTo(r * 0.2, r * 0.45);
-    ctx.lineTo(r * 0.2, -r * 0.45);
-    ctx.closePath();
-    ctx.stroke();
-    ctx.restore();
+    window.robotideSimview.startMarker(ctx, x, y, theta, r);
     if (label) {
       ctx.font = "bold 12px system-ui, sans-serif";
       ctx.textAlign = "center";

@@ -242,24 +242,7 @@
       ctx.stroke();
     });
     (w.start || []).slice(0, 1).forEach(function (start) {
-      var r = (this.robot.radius || 0.15) * s;
-      ctx.save();
-      ctx.translate(X(start.x), Y(start.y));
-      ctx.rotate(-start.theta);
-      ctx.strokeStyle = COLOURS.start;
-      ctx.lineWidth = 1.5;
-      ctx.setLineDash([3, 3]);
-      ctx.beginPath();
-      ctx.arc(0, 0, r, 0, 2 * Math.PI);
-      ctx.stroke();
-      ctx.setLineDash([]);
-      ctx.beginPath();
-      ctx.moveTo(r * 0.9, 0);
-      ctx.lineTo(r * 0.2, r * 0.45);
-      ctx.lineTo(r * 0.2, -r * 0.45);
-      ctx.closePath();
-      ctx.stroke();
-      ctx.restore();
+      startMarker(ctx, X(start.x), Y(start.y), start.theta, (this.robot.radius || 0.15) * s);
     }, this);
     (w.boxes || []).forEach(function (box) {
       polygon(rotated(box.x, box.y, box.width, box.height, box.angle));
@@ -378,9 +361,31 @@
     ctx.restore();
   };
 
+  // A start pose: a dashed circle of the robot's size (r, px) with an arrow its heading.
+  function startMarker(ctx, x, y, theta, r) {
+    ctx.save();
+    ctx.translate(x, y);
+    ctx.rotate(-theta);
+    ctx.strokeStyle = COLOURS.start;
+    ctx.lineWidth = 1.5;
+    ctx.setLineDash([3, 3]);
+    ctx.beginPath();
+    ctx.arc(0, 0, r, 0, 2 * Math.PI);
+    ctx.stroke();
+    ctx.setLineDash([]);
+    ctx.beginPath();
+    ctx.moveTo(r * 0.9, 0);
+    ctx.lineTo(r * 0.2, r * 0.45);
+    ctx.lineTo(r * 0.2, -r * 0.45);
+    ctx.closePath();
+    ctx.stroke();
+    ctx.restore();
+  }
+
   // A world drawn as here, for pages that draw it without a live robot (replay.js): a layer of
   // the canvas' size; m: {ox, oy, scale, width, height} (CSS px, as View.mapping).
   window.robotideSimview = {
+    startMarker: startMarker,
     drawWorld: function (canvas, ratio, world, robot, m) {
       return View.prototype.drawWorld.call({ canvas: canvas, ratio: ratio, world: world, robot: robot }, m);
     },
