@@ -46,6 +46,15 @@ class Language:
     # What its programs sleep and read the clock with, as tested at a sim's speed above 1x
     # (runbox.timescale, tests/clients/test_sim_speed.py): the Languages page lists them.
     clock: str = ""
+    # Its debugger (programs/clients/PROTOCOL.md, "The debugger"): what goes between the
+    # interpreter's args and the program file for a run under it; () if it has none. For a
+    # language without one, `debugger_note` says what could serve later (the Languages page).
+    debugger: tuple[str, ...] = ()
+    debugger_note: str = ""
+
+    @property
+    def debuggable(self) -> bool:
+        return bool(self.debugger)
 
     def interpreter_path(self) -> str | None:
         for candidate in self.interpreter:
@@ -63,6 +72,15 @@ class Language:
         if path is None:
             raise LanguageUnavailable(self)
         return [path, *self.args, program_file]
+
+    def debug_command(self, program_file: str) -> list[str]:
+        """The command of a run under the debugger; ValueError if the language has none."""
+        if not self.debugger:
+            raise ValueError(f"{self.label} programs cannot run under the debugger")
+        path = self.interpreter_path()
+        if path is None:
+            raise LanguageUnavailable(self)
+        return [path, *self.args, *self.debugger, program_file]
 
     def program_file(self, filename: str, source: str) -> tuple[str, str]:
         """(name, text) of the file a run writes and runs: the source as saved, or what the
@@ -192,6 +210,7 @@ LANGUAGES: dict[str, Language] = {
             template=PYTHON_TEMPLATE,
             env={"PYTHONUNBUFFERED": "1", "PYTHONDONTWRITEBYTECODE": "1"},
             client_paths={"PYTHONPATH": "{clients}/python"},
+            debugger=("-m", "robot_debug"),  # clients/python/robot_debug.py: bdb
         ),
         Language(
             name="blocks",
@@ -206,6 +225,7 @@ LANGUAGES: dict[str, Language] = {
             client_paths={"PYTHONPATH": "{clients}/python"},
             compiler=blocks_worker.to_runnable_python,
             compiled_extension=".py",
+            debugger=("-m", "robot_debug"),  # on the Python made of the blocks
         ),
         Language(
             name="shell",

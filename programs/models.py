@@ -206,6 +206,11 @@ class Run(models.Model):
     #: A hidden variant's run of an exercise's check (classroom.checking): its page, log and
     #: robot are not shown to its owner, only to their teachers and staff (programs.access).
     sealed = models.BooleanField(_("sealed"), default=False, editable=False)
+    # A run under the debugger (programs/clients/PROTOCOL.md, "The debugger"): the breakpoints
+    # and watches it starts with, {"breakpoints": [{"line": n, "condition": text or null}],
+    # "watches": [text]}; null for a plain run. Kept in the row so that an agent that takes the
+    # run from the database (untaken_runs) starts it under the debugger too.
+    debug = models.JSONField(_("debugger"), null=True, blank=True, editable=False)
 
     class Meta:
         verbose_name = _("run")
@@ -295,7 +300,8 @@ class Run(models.Model):
 
     @classmethod
     def create_for(
-        cls, program: Program, robot, user, args=(), source: str | None = None, sealed=False
+        cls, program: Program, robot, user, args=(), source: str | None = None, sealed=False,
+        debug: dict | None = None,
     ) -> "Run":
         """``source``: what runs, if not the program as saved (a checked revision's)."""
         return cls.objects.create(
@@ -307,6 +313,7 @@ class Run(models.Model):
             robot=robot,
             owner=user,
             sealed=sealed,
+            debug=debug,
         )
 
     def start_message(self) -> dict:
@@ -319,6 +326,7 @@ class Run(models.Model):
             "filename": filename,
             "args": [str(a) for a in self.args],
             "user": self.owner.get_username(),
+            **({"debug": self.debug} if self.debug is not None else {}),
         }
 
     # -- a robot's queue (robots.run_queue decides; these are its atomic steps) ---------------

@@ -17,6 +17,8 @@ import re
 import time
 from collections.abc import Callable
 
+from programs import debug_spec
+
 log = logging.getLogger(__name__)
 
 MAX_NAME = 256  # a user name, a language
@@ -130,8 +132,16 @@ SCHEMAS: dict[str, dict[str, tuple[Callable, bool]]] = {
         "filename": (_filename, REQUIRED),
         "args": (_args, OPTIONAL),
         "user": (_text(), OPTIONAL),
+        "debug": (debug_spec.check_spec, OPTIONAL),  # a run under the debugger
     },
     "run.stop": {"run_id": (_run_id, REQUIRED)},
+    # robots.debugger: a debugger command from the run's page (programs.debug_spec)
+    "run.debug": {
+        "run_id": (_run_id, REQUIRED),
+        "command": (debug_spec.check_command, REQUIRED),
+        "breakpoints": (debug_spec.check_breakpoints, OPTIONAL),
+        "watches": (debug_spec.check_watches, OPTIONAL),
+    },
     "robot.estop": {"by": (_text(), OPTIONAL), "record": (_run_id, OPTIONAL)},
     "robot.resume": {"after": (_run_id, OPTIONAL)},
     "robot.sensors": {},

@@ -9,6 +9,7 @@ from django.core.exceptions import PermissionDenied
 from django.db import transaction
 from django.utils.translation import gettext as _
 
+from programs import debug_spec
 from programs.models import Program, Run
 from robots import run_queue
 from robots.bus import begin_soon, console_group, hand_over_run, tell_agent_sync, tell_run_changed
@@ -17,10 +18,15 @@ from robots.models import Robot
 log = logging.getLogger(__name__)
 
 
-def start_run(program: Program, robot: Robot, user, args=(), source: str | None = None) -> Run:
+def start_run(
+    program: Program, robot: Robot, user, args=(), source: str | None = None,
+    debug: dict | None = None,
+) -> Run:  # fmt: skip
     """Create the run and hand it to the robot's agent (which owns the process).
     PermissionDenied if `user` may see the robot but not drive it. ``source``: what runs, if
-    not the program as saved (an exercise attempt's checked revision)."""
+    not the program as saved (an exercise attempt's checked revision). ``debug``: run it under
+    the debugger with these breakpoints and watches (programs.debug_spec; ValueError if bad,
+    RunRefused if its language has no debugger)."""
     if not robot.drivable_by(user):
         raise PermissionDenied(
             _("Only %(who)s may run programs on %(robot)s.")
@@ -37,7 +43,15 @@ def start_run(program: Program, robot: Robot, user, args=(), source: str | None 
             _("%(language)s is not available on this robot computer (%(install)s).")
             % {"language": language.label, "install": language.install_hint}
         )
-    run = Run.create_for(program, robot, user, args, source=source)
+    if debug is not None:
+        if (why := debug_spec.check_spec(debug)) is not None:
+            raise ValueError(f"debugger: {why}")
+        if not language.debuggable:
+            raise RunRefused(
+                _("%(language)s programs cannot run under the debugger yet.")
+                % {"language": language.label}
+            )
+    run = Run.create_for(program, robot, user, args, source=source, debug=debug)
     message = {
         "run_id": run.pk,
         "language": run.language,
@@ -45,6 +59,7 @@ def start_run(program: Program, robot: Robot, user, args=(), source: str | None 
         "filename": program.filename,
         "args": [str(a) for a in args],
         "user": user.get_username(),
+        **({"debug": debug} if debug is not None else {}),
     }
     transaction.on_commit(lambda: _hand_to_agent(run, message))
     return run
