@@ -47,8 +47,9 @@ class Language:
     # (runbox.timescale, tests/clients/test_sim_speed.py): the Languages page lists them.
     clock: str = ""
     # Its debugger (programs/clients/PROTOCOL.md, "The debugger"): what goes between the
-    # interpreter's args and the program file for a run under it; () if it has none. For a
-    # language without one, `debugger_note` says what could serve later (the Languages page).
+    # interpreter's args and the program file for a run under it; () if it has none.
+    # `debugger_note` (the Languages page) says what it is, or for a language without one,
+    # what of the language's own could serve later: no promise, no faking.
     debugger: tuple[str, ...] = ()
     debugger_note: str = ""
 
@@ -211,6 +212,10 @@ LANGUAGES: dict[str, Language] = {
             env={"PYTHONUNBUFFERED": "1", "PYTHONDONTWRITEBYTECODE": "1"},
             client_paths={"PYTHONPATH": "{clients}/python"},
             debugger=("-m", "robot_debug"),  # clients/python/robot_debug.py: bdb
+            debugger_note=_(
+                "Debug on the workbench: breakpoints (conditional too), stepping, variables"
+                " and watches, built on Python's own bdb."
+            ),
         ),
         Language(
             name="blocks",
@@ -226,6 +231,10 @@ LANGUAGES: dict[str, Language] = {
             compiler=blocks_worker.to_runnable_python,
             compiled_extension=".py",
             debugger=("-m", "robot_debug"),  # on the Python made of the blocks
+            debugger_note=_(
+                "Debug on the workbench, on the Python made of the blocks: the running block"
+                " lit, breakpoints on blocks, stepping, variables."
+            ),
         ),
         Language(
             name="shell",
@@ -237,6 +246,10 @@ LANGUAGES: dict[str, Language] = {
             install_hint="apt-get install bash",
             template=SHELL_TEMPLATE,
             client_paths={"PATH": "{clients}/shell"},
+            debugger_note=_(
+                "None in robotide yet. Later: bash's own traces (bash -x, set -x: each command"
+                " as it runs) or bashdb, a debugger for bash scripts."
+            ),
         ),
         Language(
             name="perl",
@@ -248,6 +261,10 @@ LANGUAGES: dict[str, Language] = {
             install_hint="apt-get install perl",
             template=PERL_TEMPLATE,
             client_paths={"PERL5LIB": "{clients}/perl"},
+            debugger_note=_(
+                "None in robotide yet. Later: Perl's built-in debugger, perl -d (perl5db.pl),"
+                " which can also talk over a port (RemotePort in PERLDB_OPTS)."
+            ),
         ),
         Language(
             name="ruby",
@@ -260,6 +277,10 @@ LANGUAGES: dict[str, Language] = {
             template=RUBY_TEMPLATE,
             env={"RUBYOPT": "-W0"},
             client_paths={"RUBYLIB": "{clients}/ruby"},
+            debugger_note=_(
+                "None in robotide yet. Later: the debug gem (rdbg), bundled with Ruby 3.1 and"
+                " newer, which can also be attached to over a socket."
+            ),
         ),
         Language(
             name="lua",
@@ -271,6 +292,10 @@ LANGUAGES: dict[str, Language] = {
             install_hint="apt-get install lua5.4 lua-socket",
             template=LUA_TEMPLATE,
             client_paths={"LUA_PATH": "{clients}/lua/?.lua;;"},
+            debugger_note=_(
+                "None in robotide yet. Later: the hooks of Lua's debug library (debug.sethook,"
+                " called at each line), on which a debugger can be built."
+            ),
         ),
         Language(
             name="javascript",
@@ -282,6 +307,10 @@ LANGUAGES: dict[str, Language] = {
             install_hint="apt-get install nodejs",
             template=JAVASCRIPT_TEMPLATE,
             client_paths={"NODE_PATH": "{clients}/javascript"},
+            debugger_note=_(
+                "None in robotide yet. Later: Node's inspector (node --inspect), which speaks"
+                " the Chrome DevTools Protocol."
+            ),
         ),
         Language(
             name="tcl",
@@ -293,6 +322,10 @@ LANGUAGES: dict[str, Language] = {
             install_hint="apt-get install tcl tcllib",
             template=TCL_TEMPLATE,
             client_paths={"TCLLIBPATH": "{clients}/tcl"},
+            debugger_note=_(
+                "None in robotide yet, and Tcl has none built in. Later: its execution traces"
+                " (trace add execution) could serve to build one."
+            ),
         ),
     ]
 }
