@@ -2,6 +2,7 @@
 
 import asyncio
 import contextlib
+import json
 import logging
 import time
 from urllib.parse import parse_qs, urlencode
@@ -159,6 +160,18 @@ class RunConsumer(DirectDispatch, AsyncWebsocketConsumer):
         head = skipped_line(skipped) if skipped else ""
         html = render_lines([(tag, text) for _number, tag, text in fresh], self.place_of)
         await self.send(f'<div id="log-lines" hx-swap-oob="beforeend">{head}{html}</div>')
+
+    async def run_debug(self, event):
+        """The run's debugger paused, goes on, or is at a line (robots.debugger): JSON text
+        {"debug": event}, beside the log's HTML, to viewers who may still see the run."""
+        if self.group is None or event.get("run_id") != getattr(self, "run_id", None):
+            return  # turned away, or a run this console followed before
+        if time.monotonic() - self.checked >= ACCESS_RECHECK_SECONDS:
+            if not await self.may_still_see():
+                await self.leave_run_group()
+                await self.close(code=4404)
+                return
+        await self.send(json.dumps({"debug": event["event"]}))
 
     async def run_state(self, event):
         # Read and rendered aside, so output lines queued behind a state change do not wait

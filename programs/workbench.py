@@ -14,6 +14,7 @@ the page offers it back when it is newer than what was saved.
 from __future__ import annotations
 
 import difflib
+import json
 
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
@@ -25,7 +26,7 @@ from django.utils import timezone
 from django.utils.translation import gettext as _
 from django.views.decorators.http import require_GET, require_POST
 
-from programs import blocks_worker
+from programs import blocks_worker, debug_spec
 from programs.access import EDIT, can, get_program_for_user
 from programs.forms import EditProgramForm, free_name, too_large
 from programs.models import MAX_SOURCE_BYTES, Draft, Program, Revision
@@ -73,10 +74,11 @@ def program_start(request: HttpRequest, program_id: int) -> HttpResponse:
     """Save (when the user may) and run; the answer is the console for the new run."""
     program = get_program_for_user(request.user, program_id)
     try:
+        debug = debug_spec_of(request)  # Debug: checked before anything is saved
         revision = _save(request, program) if can(request.user, EDIT, program) else None
         # No robot open to the user: why, not a 404 (robots.availability.NoRobotOpen).
         robot = robot_to_run_on(request.user, request.POST.get("robot", ""))
-        run = start_run(program, robot, request.user)
+        run = start_run(program, robot, request.user, debug=debug)
     except Conflict as conflict:
         return _conflict(conflict)
     except (ValueError, RunRefused, PermissionDenied) as exc:
@@ -89,6 +91,23 @@ def program_start(request: HttpRequest, program_id: int) -> HttpResponse:
     if revision is not None:
         response["X-Revision"] = str(revision)
     return response
+
+
+def debug_spec_of(request: HttpRequest) -> dict | None:
+    """Debug (action "debug"): the breakpoints and watches it starts with, from the field
+    `debug` (JSON, programs.debug_spec); None for Run. ValueError if they are not right."""
+    if request.POST.get("action") != "debug":
+        return None
+    text = request.POST.get("debug", "")
+    if not text:
+        return {"breakpoints": [], "watches": []}
+    try:
+        spec = json.loads(text)
+    except (ValueError, RecursionError):
+        raise ValueError(_("The debugger's breakpoints and watches are not JSON.")) from None
+    if (why := debug_spec.check_spec(spec)) is not None:
+        raise ValueError(_("The debugger's breakpoints and watches: %(why)s") % {"why": why})
+    return spec
 
 
 @login_required

@@ -6,7 +6,7 @@ from django.views.decorators.http import last_modified
 from django.views.generic import RedirectView
 from django.views.i18n import JavaScriptCatalog
 
-from programs import api_help, workbench
+from programs import api_help, views_debug, workbench
 from programs import views as programs
 from robotide import language, oidc, views_health, views_icon
 from robotide import views_account as account
@@ -75,6 +75,7 @@ urlpatterns = [
     path("runs/<int:run_id>/robot", programs.run_robot, name="run-robot"),
     path("runs/<int:run_id>/log", programs.run_log, name="run-log"),
     path("runs/<int:run_id>/stop", programs.run_stop, name="run-stop"),
+    path("runs/<int:run_id>/debug", views_debug.run_debug, name="run-debug"),
     path("robots/", robots.robot_list, name="robot-list"),
     path("robots/<slug:name>/", robots.robot_detail, name="robot-detail"),
     path("robots/<slug:name>/settings", robots.robot_settings, name="robot-settings"),

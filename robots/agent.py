@@ -32,9 +32,11 @@ from django.conf import settings
 from django.utils import timezone
 
 import rhal
+from programs import blocks_worker
+from programs.blocks import failing
 from programs.languages import CLIENTS_DIR, LanguageUnavailable, get_language
 from programs.models import Run
-from robots import check_sims, messages, rpc, sims
+from robots import check_sims, debugger, messages, rpc, sims
 from robots.bridges import Bridges
 from robots.bus import RUNS_GROUP, run_group
 from robots.camera import CameraHub
@@ -103,6 +105,8 @@ class ActiveRun:
     # A check sim's run: its trace, recorded from its start pose (robots.check_sims).
     trace: "check_sims.TraceRecorder | None" = field(default=None, repr=False)
     limit: asyncio.Task | None = field(default=None, repr=False)  # its time limit's watch
+    # A run under the debugger (robots.debugger): its breakpoints, watches and pauses.
+    debugger: "debugger.RunDebugger | None" = field(default=None, repr=False)
 
     def confirmed_now(self) -> bool:
         """Its claim has been answered yes."""
@@ -190,6 +194,7 @@ class RobotAgent:
         self.handlers.update(self.starts.handlers)
         self.poses = PoseStream(self)  # a sim's pose for pages that draw it (robot.world)
         self.handlers.update(self.poses.handlers)
+        self.handlers.update(debugger.channel_handlers(self))  # run.debug: the page's commands
         self.lent_to: str | None = None  # a serial bridge client has the robot's device
         self._driver_back = asyncio.Event()  # set while the driver has its device
         self._outbox: asyncio.Queue = asyncio.Queue()
@@ -622,10 +627,18 @@ class RobotAgent:
         # Compiled (blocks) in a thread: a large program must not hold up the robot's loop;
         # the others are their source, with no thread hop on every start.
         filename, source = message["filename"], message["source"]
-        if language.compiler is not None:
+        debug, source_map = message.get("debug"), None
+        if debug is not None and language.name == "blocks":  # its Python, mapped to its blocks
+            filename, source, source_map = await asyncio.to_thread(
+                blocks_mapped, language, filename, source
+            )
+            if source_map is None:  # the blocks cannot run: the program that says why, plainly
+                debug = None
+        elif language.compiler is not None:
             filename, source = await asyncio.to_thread(language.program_file, filename, source)
         program = self.isolation.home() / filename
-        argv = [*language.command(str(program)), *map(str, message.get("args", ()))]
+        command = language.command if debug is None else language.debug_command
+        argv = [*command(str(program)), *map(str, message.get("args", ()))]
         # A sim faster than real time: the program's clock too (runbox.timescale).
         argv = timescale.command(argv, timescale.speed_of(self.driver.capabilities()))
         launch = Launch(
@@ -634,6 +647,8 @@ class RobotAgent:
         )  # fmt: skip
         # The token is good before the program starts: it may call auth at once.
         active = ActiveRun(run_id, token, process, user=message.get("user", ""), claimed=claimed)
+        if debug is not None:
+            active.debugger = debugger.RunDebugger(self, run_id, debug, filename, source_map)
         on_output = partial(self._publish_output, run_id)
         if self.checking and check_sims.TraceRecorder.possible(self.driver):
             active.trace = check_sims.TraceRecorder(self.driver, self.check_time_limit)
@@ -738,6 +753,8 @@ class RobotAgent:
         self.tokens.pop(active.token, None)
         self.runs.pop(active.run_id, None)
         self.server.close_where(lambda session: session.run is active)
+        if active.debugger is not None:  # its waits end with it
+            active.debugger.close()
         # Its motion ends with it, however it ended, and so does its control of the robot.
         await self.stop_motion_of(active.run_id)
         if self.lease.release(active.run_id):
@@ -1001,6 +1018,18 @@ def flat_units(specs: dict) -> dict[str, str]:
         else:
             units[name] = unit
     return units
+
+
+def blocks_mapped(language, filename: str, source: str) -> tuple[str, str, list | None]:
+    """A blocks program to run under the debugger: (file name, its Python, the block of each
+    line, 1-based, as robots.debugger counts them), made in a worker; if the blocks cannot
+    run, the program that fails saying why, as a plain run has it, and no map."""
+    name = str(Path(filename).with_suffix(language.compiled_extension))
+    try:
+        python, blocks = blocks_worker.to_python_mapped(source)
+    except ValueError as exc:  # a BlocksError (a worker busy too): its message says why
+        return name, failing(str(exc)), None
+    return name, python, blocks
 
 
 def untaken_runs(robot_name: str) -> list[dict]:

@@ -7,6 +7,7 @@ import time
 from collections import deque
 
 import rhal
+from robots import debugger
 from robots.host_services import HostServices
 from robots.lease import Holder, LeaseHeld
 from robots.rpc import (
@@ -89,7 +90,10 @@ class RobotApi:
             "receive": self.receive,
             "memory_set": self.memory_set,
             "memory_get": self.memory_get,
+            **debugger.METHODS,  # a run under the debugger (robots.debugger)
         }
+        # These belong to the connection: they are given its session.
+        self.per_connection = {self.subscribe, self.receive, *debugger.METHODS.values()}
         # The paper's phone services: speech, the camera, barcodes, listening; and its
         # `handlers` (robot.hear: a phrase typed for listen()) the agent's to dispatch.
         self.host = HostServices(agent)
@@ -123,7 +127,7 @@ class RobotApi:
             known = ", ".join(sorted(self.methods))
             raise RpcError(METHOD_NOT_FOUND, f"no method {method!r}; methods: {known}")
         try:
-            if handler in (self.subscribe, self.receive):  # these belong to the connection
+            if handler in self.per_connection:
                 return await handler(active, params, session=session)
             return await handler(active, params)
         except RpcError:
@@ -152,11 +156,20 @@ class RobotApi:
         linear, angular = bind_params(params, ("linear", "angular"), 1)
         if active.process is not None and active.process.stop_requested:  # after Stop
             raise RpcError(ROBOT_ERROR, "this program was asked to stop: it may not drive")
+        paused = getattr(active, "debugger", None)
+        if paused is not None and paused.paused:  # a pause is a motion stop
+            raise RpcError(ROBOT_ERROR, debugger.PAUSED_HERE)
         holder = Holder("run", active.run_id, active.user)
         try:
-            return await self.agent.drive_for(holder, linear, 0.0 if angular is None else angular)
+            applied = await self.agent.drive_for(
+                holder, linear, 0.0 if angular is None else angular
+            )
         except LeaseHeld as exc:
             raise RpcError(ROBOT_ERROR, str(exc)) from None
+        if paused is not None and paused.paused:  # paused while it was on its way
+            await self.agent.stop_motion_of(active.run_id)
+            raise RpcError(ROBOT_ERROR, debugger.PAUSED_HERE)
+        return applied
 
     async def stop(self, active, params):
         bind_params(params, (), 0)
@@ -320,7 +333,11 @@ class RobotApi:
         return {"value": value, "dropped": dropped, "waiting": len(sub.values)}
 
     def forget(self, session) -> None:
-        """A connection gone: its subscriptions with it, and what waited in them."""
+        """A connection gone: its subscriptions with it, and what waited in them (a
+        debugger's waits too)."""
+        paused = getattr(session.run, "debugger", None)
+        if paused is not None:
+            paused.forget(session)
         subscriptions, session.subscriptions = session.subscriptions, {}
         for topic, sub in subscriptions.items():
             if sub.waiter is not None and not sub.waiter.done():
