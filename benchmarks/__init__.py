@@ -25,4 +25,5 @@ BENCHMARKS = (
     "sims",
     "sim_view",
     "checks",
+    "debugger",
 )

@@ -1,0 +1,287 @@
+"""The debugger's costs (issue 32): what running under it costs a program that hits no
+breakpoint, and how soon the workbench shows a breakpoint's pause.
+
+(a) Overhead. A Python program calls ``bot.sensors()`` 10,000 times in a tight loop on the sim
+robot and times the loop itself (``time.perf_counter``, printed, read back from the run's
+log): run plainly (the workbench's Run), under the debugger with no breakpoint, with a
+breakpoint on a line never reached, and with a breakpoint inside the loop whose condition is
+never true. Every run is started as the workbench starts it (POST /programs/ID/start, with
+``action=debug`` and its ``debug`` spec for the debugged ones), its console's websocket open
+before the request; a pause that comes anyway (none should) is answered with Continue and
+counted. ROUNDS rounds, the four in turn in each; each figure is the median round and its
+ratio to the plain run's median.
+
+(b) Breakpoint hit -> the page shows the paused line. Debian's Chromium (Playwright,
+headless) on the program's workbench: a breakpoint set by clicking the editor's gutter, Debug
+pressed; the program prints ``time.time()`` just before the breakpoint's line on each of
+HITS passes of its loop; the page notes ``Date.now()`` when the paused line's highlight
+appears (a MutationObserver installed before Debug), and Continue is clicked after each.
+The difference, per hit: p50, p95, max. Both clocks are the machine's (CLOCK_REALTIME; the
+sim runs at 1x, so the run's clock is not scaled).
+
+    .venv/bin/python -m benchmarks.debugger [--rounds 7] [--hits 20] [--no-browser]
+
+Figures, never a verdict: no test passes or fails on them.
+"""
+
+import argparse
+import json
+import re
+import threading
+
+from benchmarks.common import (
+    Figure,
+    appliance,
+    browser_session,
+    median,
+    percentile,
+    print_table,
+    say,
+    ws_connect,
+)
+from tests.appliance import cookie_header
+
+BENCH = "debugger"
+ROUNDS = 7
+HITS = 20
+CALLS = 10_000
+RUN_TIMEOUT = 120.0  # s: a deadline for a run to end, not how long one takes
+
+LOOP = f"""\
+
+import robot
+
+bot = robot.Robot()
+for i in range(200):  # warm-up: the connection, the sim's first readings
+    bot.sensors()
+N = {CALLS}
+t0 = time.perf_counter()
+for i in range(N):
+    reading = bot.sensors()  # IN THE LOOP
+elapsed = time.perf_counter() - t0
+print(f"loop {{N}} {{elapsed:.6f}}")
+if N < 0:
+    print("never")  # NEVER REACHED
+"""
+
+HIT = f"""\
+
+import robot
+
+bot = robot.Robot()
+for i in range({HITS + 2}):
+    bot.sensors()
+    print(f"hit {{i}} {{time.time():.6f}}")
+    here = i  # THE BREAKPOINT
+print("done")
+"""
+
+
+def line_of(source: str, marker: str) -> int:
+    return next(n for n, text in enumerate(source.splitlines(), 1) if marker in text)
+
+
+# The four ways (a) runs the loop: None is a plain run, else the debug spec it starts with.
+VARIANTS = {
+    "plain run": None,
+    "debugger, no breakpoint": {"breakpoints": [], "watches": []},
+    "debugger, breakpoint never reached": {
+        "breakpoints": [{"line": line_of(LOOP, "NEVER REACHED"), "condition": None}],
+        "watches": [],
+    },
+    "debugger, condition never true in the loop": {
+        "breakpoints": [{"line": line_of(LOOP, "IN THE LOOP"), "condition": "i < 0"}],
+        "watches": [],
+    },
+}
+
+
+# -- (a) overhead ------------------------------------------------------------------------------
+
+
+class Continuer(threading.Thread):
+    """Follows the program's workbench console (its websocket, open before the start, as the
+    page's is) and answers every pause with Continue: a debugged run that pauses anyway (at
+    its entry, say) goes on, and is counted."""
+
+    def __init__(self, app, web, program_id: int):
+        super().__init__(daemon=True)
+        self.app, self.web, self.program_id = app, web, program_id
+        self.ws = ws_connect(app, f"/ws/programs/{program_id}/console/", cookie_header(web))
+        self.run_id: int | None = None
+        self.pauses = 0
+        self.events = 0
+
+    def run(self) -> None:
+        try:
+            for message in self.ws:
+                if isinstance(message, str) and message.startswith('{"debug"'):
+                    self.events += 1
+                    if json.loads(message)["debug"].get("state") == "paused":
+                        self.pauses += 1
+                        self.command(self.run_id, "continue")
+        except Exception:  # closed at the end
+            pass
+
+    def command(self, run_id: int, command: str) -> None:
+        response = self.web.post(f"/runs/{run_id}/debug", json={"command": command})
+        if response.status_code != 202:
+            say(f"[{BENCH}] {command} -> {response.status_code} {response.text[:200]}")
+
+    def close(self) -> None:
+        self.ws.close()
+
+
+def start(web, program_id: int, source: str, spec: dict | None) -> int:
+    """A run started as the workbench starts one (Run, or Debug with its spec): its id."""
+    form = {"source": source, "language": "python", "robot": "sim"}
+    if spec is not None:
+        form.update(action="debug", debug=json.dumps(spec))
+    response = web.post(f"/programs/{program_id}/start", data=form)
+    if response.status_code != 200 or "X-Run" not in response.headers:
+        raise RuntimeError(f"start refused: {response.status_code} {response.text[:300]}")
+    return int(response.headers["X-Run"])
+
+
+def loop_seconds(app, run_id: int) -> float:
+    run = app.wait_run(run_id, timeout=RUN_TIMEOUT)
+    log = app.api("GET", f"/api/runs/{run_id}/log").text
+    found = re.search(r"loop \d+ ([0-9.]+)", log)
+    if run["state"] != "finished" or not found:
+        raise RuntimeError(f"run {run_id} {run['state']} ({run.get('reason')}): {log[-600:]}")
+    return float(found.group(1))
+
+
+def overhead(app, rounds: int) -> list[Figure]:
+    web = browser_session(app)
+    program_id = app.create_program("Bench debugger loop", LOOP)["id"]
+    follower = Continuer(app, web, program_id)
+    follower.start()
+    seconds: dict[str, list[float]] = {name: [] for name in VARIANTS}
+    try:
+        for i in range(rounds):
+            for name, spec in VARIANTS.items():
+                follower.run_id = run_id = start(web, program_id, LOOP, spec)
+                seconds[name].append(loop_seconds(app, run_id))
+            say(
+                f"[{BENCH}] round {i + 1}: "
+                + ", ".join(f"{name} {values[-1]:.3f} s" for name, values in seconds.items())
+            )
+    finally:
+        follower.close()
+        web.close()
+    plain = median(seconds["plain run"])
+    figures = []
+    for name, values in seconds.items():
+        note = f"{rounds} rounds: {min(values):.3f}-{max(values):.3f} s"
+        figures.append(
+            Figure(BENCH, f"{CALLS:,} sensors(): {name}, median", median(values), "s", note=note)
+        )
+        if name != "plain run":
+            figures.append(
+                Figure(BENCH, f"{CALLS:,} sensors(): {name} / plain", median(values) / plain, "x")
+            )
+    figures.append(
+        Figure(
+            BENCH,
+            "pauses answered in (a) (none expected)",
+            follower.pauses,
+            "",
+            note=f"{follower.events} debug events seen",
+        )
+    )
+    return figures
+
+
+# -- (b) breakpoint hit -> paused line shown ------------------------------------------------------
+
+# The paused line's highlight (debug.js, editor.js): noted the moment it appears, again after
+# each Continue (it goes while the program runs).
+PAUSED_LINE = ".CodeMirror .cm-debug-paused, .CodeMirror .debug-paused"
+WATCH_PAUSES = """(selector) => {
+  window.__paused = [];
+  let shown = false;
+  const note = () => {
+    const now = document.querySelector(selector) !== null;
+    if (now && !shown) window.__paused.push(Date.now());
+    shown = now;
+  };
+  new MutationObserver(note).observe(document.body,
+    {subtree: true, childList: true, attributes: true, attributeFilter: ["class"]});
+}"""
+
+
+def set_breakpoint(page, line: int) -> None:
+    """A click in the editor's gutter at `line` (editor.js's breakpoints)."""
+    gutter = page.locator(".CodeMirror-gutter-wrapper").nth(line - 1)
+    gutter.click()
+
+
+def paused_line(app, hits: int) -> list[Figure]:
+    from playwright.sync_api import sync_playwright
+
+    from benchmarks.workbench import load_to_editable, sign_in
+    from tests.browser.conftest import CHROMIUM, CHROMIUM_ARGS
+
+    program_id = app.create_program("Bench debugger hits", HIT)["id"]
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+        # bypass_csp: the page's CSP forbids the eval behind wait_for_function.
+        page = browser.new_context(base_url=app.url, bypass_csp=True).new_page()
+        sign_in(page)
+        load_to_editable(page, program_id)
+        set_breakpoint(page, line_of(HIT, "THE BREAKPOINT"))
+        page.evaluate(WATCH_PAUSES, PAUSED_LINE)
+        page.get_by_role("button", name="Debug").click()
+        for k in range(hits):
+            page.wait_for_function(f"window.__paused.length > {k}", timeout=RUN_TIMEOUT * 1000)
+            page.get_by_role("button", name="Continue").click()
+        shown = page.evaluate("window.__paused")
+        run_id = int(page.evaluate("document.querySelector('[data-run]')?.dataset.run || 0"))
+        page.get_by_role("button", name="Stop", exact=True).click()
+        browser.close()
+    printed = hit_times(app, program_id, run_id)
+    delays = [(shown[k] - printed[k] * 1000) for k in range(min(hits, len(shown), len(printed)))]
+    say(f"[{BENCH}] hit -> paused line shown, ms: {[round(d, 1) for d in delays]}")
+    return [
+        Figure(BENCH, "breakpoint hit -> paused line shown, p50", percentile(delays, 50), "ms"),
+        Figure(BENCH, "breakpoint hit -> paused line shown, p95", percentile(delays, 95), "ms"),
+        Figure(
+            BENCH,
+            "breakpoint hit -> paused line shown, max",
+            max(delays),
+            "ms",
+            note=f"{len(delays)} hits, Continue between them",
+        ),
+    ]
+
+
+def hit_times(app, program_id: int, run_id: int) -> list[float]:
+    """The program's time.time() before each hit, from its run's log."""
+    if not run_id:
+        runs = app.api("GET", "/api/runs").json()
+        run_id = max(r["id"] for r in runs if r.get("program") == program_id)
+    app.wait_run(run_id, timeout=RUN_TIMEOUT)
+    log = app.api("GET", f"/api/runs/{run_id}/log").text
+    return [float(t) for t in re.findall(r"hit \d+ ([0-9.]+)", log)]
+
+
+def run(rounds: int = ROUNDS, hits: int = HITS, browser: bool = True) -> list[Figure]:
+    with appliance(BENCH) as app:
+        figures = overhead(app, rounds)
+        if browser:
+            figures += paused_line(app, hits)
+    return figures
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.debugger")
+    parser.add_argument("--rounds", type=int, default=ROUNDS, help="rounds of (a)")
+    parser.add_argument("--hits", type=int, default=HITS, help="breakpoint hits of (b)")
+    parser.add_argument("--no-browser", action="store_true", help="(a) only")
+    args = parser.parse_args()
+    print_table(run(args.rounds, args.hits, not args.no_browser), BENCH)
+
+
+if __name__ == "__main__":
+    main()
