@@ -56,11 +56,11 @@ bot = robot.Robot()
 for i in range(200):  # warm-up: the connection, the sim's first readings
     bot.sensors()
 N = {CALLS}
-t0 = time.perf_counter()
+t0, c0 = time.perf_counter(), time.process_time()
 for i in range(N):
     reading = bot.sensors()  # IN THE LOOP
-elapsed = time.perf_counter() - t0
-print(f"loop {{N}} {{elapsed:.6f}}")
+elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
+print(f"loop {{N}} {{elapsed:.6f}} {{cpu:.6f}}")
 if N < 0:
     print("never")  # NEVER REACHED
 """
@@ -112,14 +112,15 @@ class Continuer(threading.Thread):
         self.ws = ws_connect(app, f"/ws/programs/{program_id}/console/", cookie_header(web))
         self.run_id: int | None = None
         self.pauses = 0
-        self.events = 0
+        self.events: dict[str, int] = {}
 
     def run(self) -> None:
         try:
             for message in self.ws:
                 if isinstance(message, str) and message.startswith('{"debug"'):
-                    self.events += 1
-                    if json.loads(message)["debug"].get("state") == "paused":
+                    state = json.loads(message)["debug"].get("state")
+                    self.events[state] = self.events.get(state, 0) + 1
+                    if state == "paused":
                         self.pauses += 1
                         self.command(self.run_id, "continue")
         except Exception:  # closed at the end
@@ -145,13 +146,14 @@ def start(web, program_id: int, source: str, spec: dict | None) -> int:
     return int(response.headers["X-Run"])
 
 
-def loop_seconds(app, run_id: int) -> float:
+def loop_seconds(app, run_id: int) -> tuple[float, float]:
+    """The loop's seconds, and the program's CPU seconds in it, as it printed them."""
     run = app.wait_run(run_id, timeout=RUN_TIMEOUT)
     log = app.api("GET", f"/api/runs/{run_id}/log").text
-    found = re.search(r"loop \d+ ([0-9.]+)", log)
+    found = re.search(r"loop \d+ ([0-9.]+) ([0-9.]+)", log)
     if run["state"] != "finished" or not found:
         raise RuntimeError(f"run {run_id} {run['state']} ({run.get('reason')}): {log[-600:]}")
-    return float(found.group(1))
+    return float(found.group(1)), float(found.group(2))
 
 
 def overhead(app, rounds: int) -> list[Figure]:
@@ -159,39 +161,30 @@ def overhead(app, rounds: int) -> list[Figure]:
     program_id = app.create_program("Bench debugger loop", LOOP)["id"]
     follower = Continuer(app, web, program_id)
     follower.start()
-    seconds: dict[str, list[float]] = {name: [] for name in VARIANTS}
+    timed: dict[str, list[tuple[float, float]]] = {name: [] for name in VARIANTS}
     try:
         for i in range(rounds):
             for name, spec in VARIANTS.items():
                 follower.run_id = run_id = start(web, program_id, LOOP, spec)
-                seconds[name].append(loop_seconds(app, run_id))
-            say(
-                f"[{BENCH}] round {i + 1}: "
-                + ", ".join(f"{name} {values[-1]:.3f} s" for name, values in seconds.items())
-            )
+                timed[name].append(loop_seconds(app, run_id))
+            done = [f"{name} {t[-1][0]:.3f} s (CPU {t[-1][1]:.3f})" for name, t in timed.items()]
+            say(f"[{BENCH}] round {i + 1}: {', '.join(done)}")
     finally:
         follower.close()
         web.close()
-    plain = median(seconds["plain run"])
     figures = []
-    for name, values in seconds.items():
-        note = f"{rounds} rounds: {min(values):.3f}-{max(values):.3f} s"
-        figures.append(
-            Figure(BENCH, f"{CALLS:,} sensors(): {name}, median", median(values), "s", note=note)
-        )
-        if name != "plain run":
-            figures.append(
-                Figure(BENCH, f"{CALLS:,} sensors(): {name} / plain", median(values) / plain, "x")
-            )
-    figures.append(
-        Figure(
-            BENCH,
-            "pauses answered in (a) (none expected)",
-            follower.pauses,
-            "",
-            note=f"{follower.events} debug events seen",
-        )
-    )
+    for k, what in ((0, "loop"), (1, "program's CPU in the loop")):
+        plain = median([t[k] for t in timed["plain run"]])
+        for name, values in timed.items():
+            found = [t[k] for t in values]
+            label = f"{CALLS:,} sensors(), {what}: {name}"
+            spread = f"{rounds} rounds: {min(found):.3f}-{max(found):.3f} s"
+            figures.append(Figure(BENCH, f"{label}, median", median(found), "s", note=spread))
+            if name != "plain run":
+                figures.append(Figure(BENCH, f"{label} / plain", median(found) / plain, "x"))
+    seen = f"debug events seen: {follower.events}"
+    figures.append(Figure(BENCH, "pauses answered in (a), none expected", follower.pauses, "",
+                          note=seen))  # fmt: skip
     return figures
 
 
