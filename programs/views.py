@@ -24,6 +24,7 @@ from programs.access import (
 )
 from programs.forms import EditProgramForm, NewProgramForm, UploadForm, unique_name
 from programs.languages import (
+    LANGUAGES,
     availability,
     editor_mode_of_language,
     editor_modes,
@@ -115,6 +116,8 @@ def _render_editor(request, program, form, status=200, conflict=None):
         "language": program.lang,
         "editor_modes": editor_modes(),
         "editor_modes_json": json.dumps(editor_mode_of_language()),
+        # The languages with a debugger: the Debug button follows the language chosen.
+        "debuggable_json": json.dumps([n for n, lang in LANGUAGES.items() if lang.debuggable]),
         **run_choices(request.user),  # robots, offer_sim, no_robot, sim_note
         "runs": runs_for_user(request.user).filter(program=program)[:10],
         "revision": program.revisions.first(),

@@ -40,6 +40,84 @@
   // The last line of a Python traceback: `Name: message`, or `Name` alone.
   var EXCEPTION = /^([A-Za-z_][\w.]*)(?:: (.*))?$/;
 
+  // -- breakpoints on blocks and the running block, for the debugger (debug.js) -------------
+  //
+  // The same face as the text editor's (editor.js textBreakpoints): list(), toggleHere(),
+  // onChange(listener), show(where). A breakpoint is a block's id ({"block": id}: the agent
+  // finds the first line of the Python that block made); the block wears a dashed outline.
+  // They are kept per program in this browser (localStorage).
+  var BREAKPOINT_CLASS = "robotide-breakpoint-block";
+  var MENU_ITEM = "robotide-toggle-breakpoint";
+
+  function blockBreakpoints(workspace, programId) {
+    var key = "robotide-breakpoints-" + programId;
+    var ids = [];
+    var listeners = [];
+    var shown = null;
+    try {
+      ids = JSON.parse(localStorage.getItem(key) || "[]").map(function (point) { return point.block; })
+        .filter(function (id) { return typeof id === "string"; });
+    } catch (e) { ids = []; }
+
+    function list() {
+      return ids.filter(function (id) { return workspace.getBlockById(id); })
+        .map(function (id) { return {block: id, condition: null}; });
+    }
+    function paint() {
+      workspace.getAllBlocks(false).forEach(function (block) {
+        var svg = block.getSvgRoot && block.getSvgRoot();
+        if (svg) svg.classList.toggle(BREAKPOINT_CLASS, ids.indexOf(block.id) >= 0);
+      });
+    }
+    function toggle(id) {
+      if (!id) return;
+      var at = ids.indexOf(id);
+      if (at >= 0) ids.splice(at, 1); else ids.push(id);
+      paint();
+      try { localStorage.setItem(key, JSON.stringify(list())); } catch (e) { /* not kept */ }
+      var now = list();
+      listeners.forEach(function (listener) { listener(now); });
+    }
+
+    var registry = Blockly.ContextMenuRegistry.registry;
+    if (!registry.getItem(MENU_ITEM)) {
+      registry.register({
+        id: MENU_ITEM,
+        scopeType: Blockly.ContextMenuRegistry.ScopeType.BLOCK,
+        weight: 200,
+        displayText: function (scope) {
+          var on = window.robotideBreakpoints && window.robotideBreakpoints.has(scope.block.id);
+          return on ? gettext("Remove the breakpoint") : gettext("Toggle breakpoint");
+        },
+        preconditionFn: function (scope) { return scope.block.isShadow() ? "hidden" : "enabled"; },
+        callback: function (scope) { window.robotideBreakpoints.toggleBlock(scope.block.id); },
+      });
+    }
+    // Blocks loaded again (a draft restored, an undo) have new drawings: marked again.
+    workspace.addChangeListener(function (event) { if (!event.isUiEvent) paint(); });
+    paint();
+
+    return {
+      list: list,
+      has: function (id) { return ids.indexOf(id) >= 0; },
+      toggleBlock: toggle,
+      toggleHere: function () {
+        var selected = Blockly.common.getSelected();
+        if (selected && selected.id && workspace.getBlockById(selected.id)) toggle(selected.id);
+      },
+      onChange: function (listener) { listeners.push(listener); },
+      // The running block ({block: id}), highlighted; a pause's also brought into view.
+      show: function (where, paused) {
+        var id = where && where.block && workspace.getBlockById(where.block) ? where.block : null;
+        if (id === shown && !paused) return;
+        shown = id;
+        workspace.highlightBlock(id);
+        if (id && paused) workspace.centerOnBlock(id);
+      },
+      shownBlock: function () { return shown; },
+    };
+  }
+
   document.addEventListener("DOMContentLoaded", function () {
     var bench = document.getElementById("blocks-bench");
     var textarea = document.getElementById("source");
@@ -87,6 +165,7 @@
       });
     showPython();
     var workspace = editor.workspace;
+    window.robotideBreakpoints = blockBreakpoints(workspace, textarea.form.dataset.programId);
 
     // -- a run's error, marked on its block ------------------------------------------------
 

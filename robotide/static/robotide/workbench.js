@@ -42,10 +42,11 @@
     if (editor) editor.on("change", showDirty); else textarea.addEventListener("input", showDirty);
     if (language) language.addEventListener("change", showDirty);
 
-    function post(url, action) {
+    function post(url, action, fields) {
       if (editor) editor.save();
       var data = new FormData(form);
       data.set("action", action);
+      Object.keys(fields || {}).forEach(function (name) { data.set(name, fields[name]); });
       // The header's token, read now: the form's may be stale after signing in again.
       data.delete("csrfmiddlewaretoken");
       return fetch(url, {
@@ -90,21 +91,24 @@
         });
       }, offline).finally(function () { busy = false; });
     }
-    // An exercise's Check (check_panel.js) saves as Save does, then checks what was saved.
-    window.robotideWorkbench = { save: save };
+    // An exercise's Check (check_panel.js) saves as Save does, then checks what was saved;
+    // the debugger (debug.js) starts as Run does, under the debugger with its spec.
+    window.robotideWorkbench = { save: save, debug: function (spec) { return run(spec); } };
 
-    function run() {
-      if (busy) return;
+    // Saves and starts the run (a debugger's `spec`: under the debugger); its id, or null.
+    function run(spec) {
+      if (busy) return Promise.resolve(null);
       busy = true;
       say(canEdit ? gettext("Saving and starting…") : gettext("Starting…"), "busy");
-      post(form.dataset.startUrl, "run").then(function (response) {
+      var fields = spec ? {debug: JSON.stringify(spec)} : null;
+      return post(form.dataset.startUrl, spec ? "debug" : "run", fields).then(function (response) {
         return trouble(response).then(function (failed) {
-          if (failed) return;
+          if (failed) return null;
           if (canEdit) saveAnswered(response.headers.get("X-Revision"));
           else say(gettext("Started"), "saved");
           mySimMade(response.headers.get("X-Robot"));
           var id = response.headers.get("X-Run");
-          return response.text().then(function (html) { showRun(id, html); });
+          return response.text().then(function (html) { showRun(id, html); return id; });
         });
       }, offline).finally(function () { busy = false; });
     }
@@ -227,7 +231,7 @@
     form.addEventListener("submit", function (event) {
       var action = event.submitter && event.submitter.value;
       if (action === "save") { event.preventDefault(); save(); }
-      else if (action === "run") { event.preventDefault(); run(); }
+      else if (action === "run") { event.preventDefault(); run(null); }
       else saved = snapshot();  // save as: a page change the user asked for
     });
 
@@ -237,7 +241,7 @@
     document.addEventListener("keydown", function (event) {
       var mod = event.ctrlKey || event.metaKey;
       if (mod && (event.key === "s" || event.key === "S")) { event.preventDefault(); save(); }
-      else if (mod && event.key === "Enter") { event.preventDefault(); run(); }
+      else if (mod && event.key === "Enter") { event.preventDefault(); run(null); }
       else if (event.key === "Escape") {
         if (event.timeStamp - lastEscape < 800) { stop(); lastEscape = 0; }
         else lastEscape = event.timeStamp;
@@ -245,7 +249,7 @@
     });
     if (editor) {
       editor.setOption("extraKeys", Object.assign({}, editor.getOption("extraKeys"), {
-        "Ctrl-S": save, "Cmd-S": save, "Ctrl-Enter": run, "Cmd-Enter": run,
+        "Ctrl-S": save, "Cmd-S": save, "Ctrl-Enter": function () { run(null); }, "Cmd-Enter": function () { run(null); },
         // Esc then Tab leaves the editor, so the keyboard is never trapped in it.
         Esc: function (cm) { cm.state.leaving = true; setTimeout(function () { cm.state.leaving = false; }, 1500); },
         Tab: function (cm) {

@@ -1,0 +1,178 @@
+"""The workbench's debugger in a real browser (issue 32), on the appliance's sim robot.
+
+The example *Stop before the wall* (programs/examples/wall.py, every user's copy): a breakpoint
+set by clicking the gutter beside the loop's `bot.show(...)` line, Debug, it pauses there with
+`distance` among the variables while the robot stands still; Step over moves the paused line;
+a watch says `distance < STOP_AT` False, and True later; Continue runs to the end. Also: the
+emergency stop ends a paused run, a conditional breakpoint pauses only when its condition
+holds, a program's values are shown as text (never as HTML), axe-core on the paused page, and
+breakpoints follow their lines and are kept per program. Screenshots (1280 and 390 wide):
+test-artifacts/screenshots/debugger-*.png.
+"""
+
+import re
+
+import pytest
+from playwright.sync_api import Page, expect
+
+from tests.appliance import wait_for
+from tests.browser.test_accessibility import AXE, AXE_URL, axe_violations
+from tests.browser.test_pages import assert_not_reloaded, editor_text, mark_page, sign_in
+from tests.browser.test_workbench import new_program
+
+WALL = "Stop before the wall"
+SHOW_LINE = 13  # bot.show("range", round(distance, 2)), inside the loop
+IF_LINE = 14  # if distance < STOP_AT:
+BREAK_LINE = 15  # break: only once the robot is near the wall
+
+
+@pytest.fixture
+def bench(new_page, appliance) -> Page:
+    """Admin's browser (axe at hand), the sim robot at its start and free to move."""
+    appliance.resume()  # whatever an earlier test pressed
+    appliance.api("POST", "/api/robots/sim/reset")
+    page = new_page()
+    page.route(f"**{AXE_URL}", lambda route: route.fulfill(path=AXE, content_type="text/javascript"))
+    sign_in(page)
+    return page
+
+
+def open_example(page: Page, name: str = WALL) -> None:
+    """The example as every user has it: copied among their programs."""
+    page.goto("/programs/")
+    page.locator("#programs").get_by_role("link", name=name, exact=True).click()
+    expect(page.locator(".CodeMirror")).to_be_visible()
+    expect(page.locator("#bench-panel #sensors")).to_be_visible()  # the robot, live
+
+
+def open_program(page: Page, program_id: int) -> None:
+    page.goto(f"/programs/{program_id}/")
+    expect(page.locator(".CodeMirror")).to_be_visible()
+    expect(page.locator("#bench-panel #sensors")).to_be_visible()
+
+
+def gutter(page: Page, line: int):
+    """The line's number in the editor's gutter (1-based), what a student clicks."""
+    return page.locator(".CodeMirror-linenumber").filter(has_text=re.compile(rf"^{line}$"))
+
+
+def line_text(page: Page, line: int) -> str:
+    return page.evaluate("n => window.robotideEditor.getLine(n - 1)", line)
+
+
+def breakpoints(page: Page) -> list[dict]:
+    return page.evaluate("window.robotideBreakpoints.list()")
+
+
+def status(page: Page):
+    return page.locator("#debug-status")
+
+
+def variable(page: Page, name: str):
+    """A variable's line in the Variables panel (its name exactly)."""
+    return page.locator("#debug-globals .var, #debug-locals .var").filter(
+        has=page.locator(".var-name", has_text=re.compile(rf"^{re.escape(name)}$"))
+    )
+
+
+def paused_line(page: Page):
+    return page.locator(".CodeMirror .debug-line")
+
+
+def velocity(appliance) -> float:
+    return appliance.api("GET", "/api/robots/sim/sensors").json()["velocity"]["linear"]
+
+
+def watch(page: Page, expression: str):
+    return page.locator("#debug-watches li.debug-watch").filter(has_text=expression)
+
+
+def add_watch(page: Page, expression: str) -> None:
+    page.get_by_label("Watch an expression").fill(expression)
+    page.get_by_label("Watch an expression").press("Enter")
+
+
+def run_state(appliance, run_id: int) -> str:
+    return appliance.api("GET", f"/api/runs/{run_id}").json()["state"]
+
+
+def debug_run_id(page: Page) -> int:
+    run = page.locator("#console #console-run[data-run]")
+    expect(run).to_have_count(1)
+    return int(run.get_attribute("data-run"))
+
+
+# -- breakpoints in the editor (no run) ------------------------------------------------------
+
+
+def test_breakpoints_follow_their_lines_and_are_kept_per_program(bench, appliance, screenshot):
+    page = bench
+    program = new_program(appliance, "Debug breakpoints", "a = 1\nb = 2\nc = 3\nprint(a + b + c)\n")
+    open_program(page, program)
+    gutter(page, 3).click()  # a click beside the number: a breakpoint
+    expect(page.locator(".CodeMirror .breakpoint")).to_have_count(1)
+    assert breakpoints(page) == [{"line": 3, "condition": None}]
+
+    # F9 on the cursor's line, from the keyboard.
+    page.evaluate("window.robotideEditor.setCursor({line: 0, ch: 0})")
+    page.locator(".CodeMirror textarea").focus()
+    page.keyboard.press("F9")
+    assert breakpoints(page) == [{"line": 1, "condition": None}, {"line": 3, "condition": None}]
+
+    # A line typed above: the breakpoints move with their lines.
+    page.keyboard.press("Home")
+    page.keyboard.press("Enter")  # the line's text pushed down, and its breakpoint
+    page.keyboard.press("ArrowUp")
+    page.keyboard.type("import robot")
+    assert breakpoints(page) == [{"line": 2, "condition": None}, {"line": 4, "condition": None}]
+    assert line_text(page, 4) == "c = 3"
+
+    # Shift+click: a condition, in a small form under the line (not a prompt).
+    gutter(page, 4).click(modifiers=["Shift"])
+    condition = page.get_by_label("Pause at line 4 only when")
+    expect(condition).to_be_focused()
+    condition.fill("a + b > 2")
+    condition.press("Enter")
+    expect(page.locator(".breakpoint-form")).to_have_count(0)
+    expect(page.locator(".CodeMirror .breakpoint.conditional")).to_have_count(1)
+    assert breakpoints(page)[1] == {"line": 4, "condition": "a + b > 2"}
+    # The right button opens it too; Esc leaves it as it was.
+    gutter(page, 2).click(button="right")
+    expect(page.get_by_label("Pause at line 2 only when")).to_be_focused()
+    page.keyboard.press("Escape")
+    expect(page.locator(".breakpoint-form")).to_have_count(0)
+    screenshot(page, "debugger-breakpoints")
+
+    # Kept in this browser, per program: the page again (saved first) has them.
+    page.keyboard.press("Control+s")
+    expect(page.locator("#save-state")).to_contain_text("Saved")
+    page.reload()
+    expect(page.locator(".CodeMirror .breakpoint")).to_have_count(2)
+    assert breakpoints(page) == [
+        {"line": 2, "condition": None},
+        {"line": 4, "condition": "a + b > 2"},
+    ]
+    gutter(page, 2).click()  # a click again: gone
+    assert breakpoints(page) == [{"line": 4, "condition": "a + b > 2"}]
+    other = new_program(appliance, "Debug other", "print(1)\n")
+    open_program(page, other)
+    assert breakpoints(page) == []
+
+
+def test_debug_is_offered_for_languages_with_a_debugger_only(bench, appliance):
+    page = bench
+    open_program(page, new_program(appliance, "Debug which", "print(1)\n"))
+    debug = page.get_by_role("button", name="Debug", exact=True)
+    expect(debug).to_be_enabled()
+    expect(page.locator("#bench-no-debugger")).to_be_hidden()
+    page.locator("#editor-form select[name=language]").select_option("shell")
+    expect(debug).to_be_disabled()
+    expect(debug).to_have_attribute("title", re.compile(r"Shell has no debugger yet"))
+    link = page.get_by_role("link", name="No debugger yet")
+    expect(link).to_have_attribute("href", "/languages/")
+    page.locator("#editor-form select[name=language]").select_option("python")
+    expect(debug).to_be_enabled()
+    page.locator("details.shortcuts summary").click()
+    keys = page.locator("details.shortcuts")
+    for said in ("step over", "step into", "step out", "continue, or pause", "a breakpoint"):
+        expect(keys).to_contain_text(said)
