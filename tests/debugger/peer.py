@@ -129,6 +129,12 @@ class _Server(socketserver.ThreadingUnixStreamServer):
 class _Connection(socketserver.StreamRequestHandler):
     def handle(self):
         peer = self.server.peer
+        try:
+            self.serve(peer)
+        except OSError:
+            pass  # the debuggee ended
+
+    def serve(self, peer):
         signed_in = False
         for line in self.rfile:
             request = json.loads(line)
@@ -154,4 +160,3 @@ class _Connection(socketserver.StreamRequestHandler):
                 self.wfile.write(json.dumps(reply).encode() + b"\n")
             except OSError:
                 return
-

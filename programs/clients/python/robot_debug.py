@@ -16,7 +16,7 @@ What this debugger does where the protocol leaves a choice:
   program where it went through) before Python's traceback is printed; then exit status 1.
 - `stop` ends the program at once (no `finally`, no atexit), exit status 0.
 - A pause request reaches a program blocked in a call (a sleep, a robot call) when the call
-  returns. `pause` and unknown commands while paused are `update`.
+  returns. `pause` while paused is `update`; an unknown command is `continue`.
 - The debugger writes nothing on stdout; it says on stderr only why it could not go on.
 
 Cost: the trace function is set on the main thread only; calls into other files return at
@@ -609,10 +609,12 @@ def poll(debugger, channel, report_line):
             continue
         except (OSError, ValueError):
             return
-        if reply and debugger.running.is_set():
+        if reply:
+            # The agent answers a poll only while the program runs, so a reply that finds
+            # it paused was said after the pause's answer, which the main thread has not
+            # read yet: it comes after that answer.
+            debugger.running.wait()
             debugger.apply(reply)
-        elif reply:
-            debugger.apply({k: v for k, v in reply.items() if k != "pause"})
 
 
 def main_namespace(filename):
