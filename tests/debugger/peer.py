@@ -15,6 +15,7 @@ import threading
 from tests.waiting import DEADLINE
 
 TOKEN = "debug-token"
+CLOSE = "(close the connection)"  # answer(CLOSE): the run ends during the pause
 
 
 class Peer:
@@ -91,6 +92,8 @@ class Peer:
     def debug_paused(self, state):
         self.pauses.put(state)
         command = self.answers.get(timeout=DEADLINE)
+        if command == CLOSE:
+            raise _Closed
         with self.lock:
             return {"command": command, **self.now()}
 
@@ -122,6 +125,10 @@ class _Refused(Exception):
         self.code = code
 
 
+class _Closed(Exception):
+    pass
+
+
 class _Server(socketserver.ThreadingUnixStreamServer):
     daemon_threads = True
 
@@ -131,8 +138,8 @@ class _Connection(socketserver.StreamRequestHandler):
         peer = self.server.peer
         try:
             self.serve(peer)
-        except OSError:
-            pass  # the debuggee ended
+        except (OSError, _Closed):
+            pass  # the debuggee ended, or the test ended the connection
 
     def serve(self, peer):
         signed_in = False

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.debugger.peer import Peer
+from tests.debugger.peer import CLOSE, Peer
 from tests.waiting import DEADLINE
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -328,6 +328,20 @@ def test_an_uncaught_exception_pauses_then_prints_pythons_traceback(debug, tmp_p
     expected = plain(tmp_path / "program.py")
     assert (status, out, err) == (1, "", expected.stderr)
     assert expected.returncode == 1 and "robot_debug" not in err
+
+
+def test_a_run_ended_during_a_pause_ends_the_program_quietly(debug):
+    peer, debuggee = debug(WALL, [point(line_of(WALL, "bot.show("))])
+    peer.paused()
+    peer.answer(CLOSE)  # the agent closes the run's connections (Stop, the emergency stop)
+    assert debuggee.finish() == (0, "", "")
+
+
+def test_a_crash_whose_pause_the_run_ends_still_says_its_traceback(debug, tmp_path):
+    peer, debuggee = debug(CRASH)
+    peer.paused()
+    peer.answer(CLOSE)
+    assert debuggee.finish() == (1, "", plain(tmp_path / "program.py").stderr)
 
 
 @pytest.mark.parametrize(

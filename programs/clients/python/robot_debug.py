@@ -439,7 +439,10 @@ class Debugger(bdb.Bdb):
         self.trace_callers(frame)
         try:
             while True:
-                reply = self.say_paused(self.state(frame, reason, error))
+                try:
+                    reply = self.say_paused(self.state(frame, reason, error))
+                except _Lost as lost:
+                    lost.end()
                 self.apply(reply)
                 command = reply.get("command") if isinstance(reply, dict) else None
                 if command not in ("update", "pause"):
@@ -465,18 +468,17 @@ class Debugger(bdb.Bdb):
             frame = frame.f_back
 
     def say_paused(self, state):
+        """The command (and changes) the agent answers a pause with; _Lost if it cannot."""
         try:
-            return self.channel.call("debug_paused", state)
-        except robot.RobotError as refused:
-            if refused.code != -32602:
-                _lost(refused)
-            state.update(locals=[], globals=[], watches=[], exception="the state is too large")
             try:
                 return self.channel.call("debug_paused", state)
-            except robot.RobotError as again:
-                _lost(again)
-        except OSError as broken:
-            _lost(broken)
+            except robot.RobotError as refused:
+                if refused.code != -32602:
+                    raise
+            state.update(locals=[], globals=[], watches=[], exception="the state is too large")
+            return self.channel.call("debug_paused", state)
+        except (robot.RobotError, OSError, ValueError) as error:
+            raise _Lost(error) from None
 
     def state(self, frame, reason, error=None, stack=None, line=None):
         values = _Values(STATE_BYTES - 4096)
@@ -559,11 +561,12 @@ class Debugger(bdb.Bdb):
         self.running.clear()
         try:
             reply = self.say_paused(state)
-            self.apply(reply)
-            if isinstance(reply, dict) and reply.get("command") == "stop":
-                _end(STOP_STATUS)
+        except _Lost:
+            return  # the run has ended: the traceback is still the program's last word
         finally:
             self.running.set()
+        if isinstance(reply, dict) and reply.get("command") == "stop":
+            _end(STOP_STATUS)
 
 
 def _walk_tb(tb):
@@ -590,9 +593,15 @@ def _end(status):
     os._exit(status)
 
 
-def _lost(error):
-    print(f"robot_debug: the agent does not answer the debugger: {error}", file=sys.stderr)
-    _end(STOP_STATUS)
+class _Lost(Exception):
+    """The agent did not answer a pause: the run has ended (its connections closed), or the
+    agent refused the debugger."""
+
+    def end(self):
+        error = self.args[0]
+        if not (isinstance(error, robot.RobotError) and error.code is None):
+            print(f"robot_debug: the agent refused the debugger: {error}", file=sys.stderr)
+        _end(STOP_STATUS)
 
 
 def poll(debugger, channel, report_line):
