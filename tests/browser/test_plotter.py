@@ -51,6 +51,18 @@ while True:
     i += 1
     time.sleep(0.05)
 """
+MANY = """\
+print(", ".join(f"s{i}: {i}" for i in range(25)))
+for i in range(100):
+    print(f"s0: {i}")
+"""
+STEPS = """\
+import time
+
+for i in range(20):
+    print(f"step={i}")
+    time.sleep(0.05)
+"""
 WORDS = """\
 print("hello")
 print("countdown 3")
@@ -217,3 +229,46 @@ def test_words_make_no_plot(page, appliance):
     expect(page.locator("#console #log-lines .ln.o")).to_have_count(3)
     expect(page.locator("#plotter")).to_be_hidden()
     assert plotted(page, "points()") == 0
+
+
+def test_series_and_points_are_capped_and_the_page_says_so(page, appliance):
+    program = new_program(appliance, "Plot caps", MANY)
+    open_bench(page, program)
+    # Fewer points kept than the program prints: the limit is the page's, lowered here.
+    page.locator("#plotter").evaluate("(plotter) => { plotter.dataset.maxPoints = 50; }")
+    page.get_by_role("button", name="Save and run").click()
+    finished(page)
+    page.wait_for_function("() => window.robotidePlotter.values('s0').at(-1) === 99")
+    assert plotted(page, "series()") == [f"s{i}" for i in range(20)]
+    expect(page.locator("#plotter-too-many")).to_be_visible()
+    expect(page.locator("#plotter-dropped")).to_be_visible()
+    assert 50 <= plotted(page, "points()") <= 55
+    assert plotted(page, "values('s0')")[0] > 0  # the oldest went
+
+
+def test_history_and_zoom_go_back_and_resume_follows(page, appliance):
+    run(page, appliance, "Plot history", STEPS)
+    finished(page)
+    wait_for_values(page, "step", 20)
+    page.wait_for_function("() => window.robotidePlotter.view().drawn === 20")
+    live = plotted(page, "view()")
+    history = page.get_by_label("History")
+    history.fill("0")  # the slider's start: the run's first values
+    back = plotted(page, "view()")
+    assert back["max"] < live["max"] and not plotted(page, "following()")
+    expect(page.locator("#plotter-view")).to_contain_text("Showing")
+    resume = page.get_by_role("button", name="Resume")
+    resume.click()
+    page.wait_for_function("(max) => window.robotidePlotter.view().max === max", arg=live["max"])
+    # Dragging across the chart zooms into that stretch and stops following.
+    over = page.locator("#plotter-chart .u-over").bounding_box()
+    y = over["y"] + over["height"] / 2
+    page.mouse.move(over["x"] + over["width"] * 0.2, y)
+    page.mouse.down()
+    page.mouse.move(over["x"] + over["width"] * 0.5, y, steps=5)
+    page.mouse.up()
+    zoomed = plotted(page, "view()")
+    assert live["min"] < zoomed["min"] < zoomed["max"] < live["max"]
+    expect(resume).to_have_attribute("aria-pressed", "true")
+    resume.click()
+    page.wait_for_function("(max) => window.robotidePlotter.view().max === max", arg=live["max"])

@@ -70,9 +70,7 @@
     var consoleBox = document.getElementById("console");
     if (!section || !consoleBox || !window.uPlot) return;
     var words = section.dataset;
-    var maxPoints = Number(words.maxPoints) || 20000;
-    var maxSeries = Number(words.maxSeries) || 20;
-    var windowSeconds = Number(words.window) || 30;
+    var maxPoints, maxSeries, windowSeconds;  // read at each run's start (limits())
     var chartBox = document.getElementById("plotter-chart");
     var pauseButton = document.getElementById("plotter-pause");
     var scroll = document.getElementById("plotter-scroll");
@@ -101,7 +99,14 @@
       rebuild();
     }
 
+    function limits() {
+      maxPoints = Number(words.maxPoints) || 20000;
+      maxSeries = Number(words.maxSeries) || 20;
+      windowSeconds = Number(words.window) || 30;
+    }
+
     function newRun(id) {
+      limits();
       run = id;
       startedAt = performance.now();
       linesRead = 0;
@@ -126,7 +131,7 @@
       times.push((performance.now() - startedAt) / 1000);
       names.forEach(function (name) { columns[name].push(name in row ? row[name] : null); });
       dropOldest();
-      section.hidden = false;
+      if (section.hidden) section.hidden = false;
       if (added) rebuild(); else drawSoon();
     }
 
@@ -141,7 +146,15 @@
 
     // -- reading the console and the robot panel ------------------------------------------
 
+    var busyMs = 0;  // time spent reading lines and drawing (robotidePlotter.busy)
+
     function readConsole() {
+      var began = performance.now();
+      readLines();
+      busyMs += performance.now() - began;
+    }
+
+    function readLines() {
       var place = consoleBox.querySelector("#console-run[data-run]");
       if (!place) return;
       if (place.dataset.run !== run) newRun(place.dataset.run);
@@ -176,6 +189,8 @@
     new MutationObserver(readConsole).observe(consoleBox, { childList: true, subtree: true });
     document.addEventListener("htmx:wsAfterMessage", function (event) {
       // The robot panel's readings (and any shown values with them) were just swapped in.
+      var message = event.detail && event.detail.message;
+      if (typeof message !== "string" || message.indexOf('id="sensors"') < 0) return;
       if (event.target.closest && event.target.closest("#bench-panel")) setTimeout(sampleShows, 0);
     });
 
@@ -234,7 +249,7 @@
     // Following: the newest values, each redraw. Not following: the view stays as it was
     // (new values are recorded, not drawn) until the user moves it.
     function draw(moved) {
-      lastDraw = performance.now();
+      var began = lastDraw = performance.now();
       if (chart && (following || moved)) {
         var view = following ? followedView() : frozen;
         chart.batch(function () {
@@ -246,6 +261,7 @@
         latestInLegend();
       }
       scrollMatches();
+      busyMs += performance.now() - began;
     }
 
     // With the pointer off the chart, its legend says the newest values (uPlot's says none).
@@ -360,11 +376,13 @@
       points: function () { return times.length; },
       following: function () { return following; },
       draws: function () { return draws; },
+      busy: function () { return busyMs; },
       colors: COLORS.slice(),
       view: function () {
         return chart && { min: chart.scales.x.min, max: chart.scales.x.max, drawn: chart.data[0].length };
       },
     };
+    limits();
     readConsole();
   });
 })();
