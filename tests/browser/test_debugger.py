@@ -88,8 +88,8 @@ def watch(page: Page, expression: str):
 
 
 def add_watch(page: Page, expression: str) -> None:
-    page.get_by_label("Watch an expression").fill(expression)
-    page.get_by_label("Watch an expression").press("Enter")
+    page.get_by_role("textbox", name="Watch an expression").fill(expression)
+    page.get_by_role("textbox", name="Watch an expression").press("Enter")
 
 
 def run_state(appliance, run_id: int) -> str:
@@ -176,3 +176,164 @@ def test_debug_is_offered_for_languages_with_a_debugger_only(bench, appliance):
     keys = page.locator("details.shortcuts")
     for said in ("step over", "step into", "step out", "continue, or pause", "a breakpoint"):
         expect(keys).to_contain_text(said)
+
+
+# -- the issue's scenario ----------------------------------------------------------------------
+
+
+def debug(page: Page) -> None:
+    page.get_by_role("button", name="Debug", exact=True).click()
+    expect(page.locator("#debug-panel")).to_be_visible()
+
+
+def test_stop_before_the_wall_under_the_debugger(bench, appliance, screenshot):
+    page = bench
+    open_example(page)
+    mark_page(page)
+    assert "bot.show(" in line_text(page, SHOW_LINE)
+    gutter(page, SHOW_LINE).click()
+    debug(page)
+
+    # It pauses at the breakpoint, the line shown, `distance` among the variables.
+    expect(status(page)).to_have_text(f"Paused at line {SHOW_LINE} (breakpoint)", timeout=30_000)
+    expect(paused_line(page)).to_contain_text("bot.show(")
+    distance = variable(page, "distance")
+    expect(distance.locator(".var-type")).to_have_text("float")
+    first = float(distance.locator(".var-value").inner_text())
+    assert first > 0.5
+    expect(variable(page, "STOP_AT").locator(".var-value")).to_have_text("0.5")
+    run_id = debug_run_id(page)
+    assert run_state(appliance, run_id) == "running"
+    # A pause is a motion stop: the robot stands still while it lasts.
+    wait_for(lambda: velocity(appliance) == 0.0, timeout=5, what="the robot stopped")
+    for width in (1280, 390):
+        page.set_viewport_size({"width": width, "height": 860})
+        page.locator("#debug-panel").scroll_into_view_if_needed()
+        screenshot(page, f"debugger-paused-{width}")
+    page.set_viewport_size({"width": 1280, "height": 860})
+
+    # Step over: the next line.
+    page.get_by_role("button", name="Step over").click()
+    expect(status(page)).to_have_text(f"Paused at line {IF_LINE} (step)")
+    expect(paused_line(page)).to_contain_text("if distance < STOP_AT:")
+
+    # A watch added while paused: the debugger evaluates it, the pause is said again.
+    add_watch(page, "distance < STOP_AT")
+    expect(watch(page, "distance < STOP_AT").locator(".var-value")).to_have_text("False")
+
+    # Near the wall: the breakpoint moves to `break`, which runs only then (the debugger is
+    # told as it changes); Continue (F8) runs on to it.
+    gutter(page, SHOW_LINE).click()
+    gutter(page, BREAK_LINE).click()
+    page.keyboard.press("F8")
+    expect(status(page)).to_have_text(f"Paused at line {BREAK_LINE} (breakpoint)", timeout=30_000)
+    expect(watch(page, "distance < STOP_AT").locator(".var-value")).to_have_text("True")
+    expect(distance.locator(".var-value")).not_to_have_text(str(first))
+    expect(distance).to_have_class(re.compile(r"\bchanged\b"))  # since the last pause
+
+    # Continue: to the end.
+    page.get_by_role("button", name="Continue").click()
+    console = page.locator("#console")
+    expect(console.locator("#run-status")).to_have_attribute("data-state", "finished", timeout=30_000)
+    expect(console.locator("#log-lines .ln.o").last).to_contain_text(
+        re.compile(r"Stopped \d\.\d\d m before the wall")
+    )
+    expect(status(page)).to_have_text("Ended (finished)")
+    expect(paused_line(page)).to_have_count(0)
+    for command in ("Continue", "Step over", "Step into", "Step out", "Pause"):
+        expect(page.get_by_role("button", name=command, exact=True)).to_be_disabled()
+    assert run_state(appliance, run_id) == "finished"
+    assert_not_reloaded(page)
+
+
+def test_the_emergency_stop_ends_a_paused_run(bench, appliance):
+    page = bench
+    open_example(page)
+    gutter(page, SHOW_LINE).click()
+    debug(page)
+    expect(status(page)).to_have_text(f"Paused at line {SHOW_LINE} (breakpoint)", timeout=30_000)
+    run_id = debug_run_id(page)
+    try:
+        page.get_by_role("button", name="EMERGENCY STOP").click()
+        console = page.locator("#console")
+        expect(console.locator("#run-status")).to_have_attribute("data-state", "stopped")
+        expect(status(page)).to_have_text("Ended (stopped)")
+        expect(paused_line(page)).to_have_count(0)
+        expect(page.get_by_role("button", name="Continue")).to_be_disabled()
+        assert run_state(appliance, run_id) == "stopped"
+    finally:
+        appliance.resume()  # the shared appliance's robot, for the tests after this one
+
+
+def test_a_conditional_breakpoint_pauses_only_when_it_holds(bench, appliance, screenshot):
+    page = bench
+    open_example(page)
+    gutter(page, SHOW_LINE).click(button="right")
+    condition = page.get_by_label(f"Pause at line {SHOW_LINE} only when")
+    condition.fill("distance < 1.0")
+    condition.press("Enter")
+    assert breakpoints(page) == [{"line": SHOW_LINE, "condition": "distance < 1.0"}]
+    debug(page)
+    expect(status(page)).to_have_text(f"Paused at line {SHOW_LINE} (breakpoint)", timeout=30_000)
+    paused_at = float(variable(page, "distance").locator(".var-value").inner_text())
+    assert 0.5 <= paused_at < 1.0  # it drove on, unpaused, until the condition held
+    # axe-core on the page as it is while paused. Left out: the console's empty output box
+    # (templates/programs/_console.html: a <pre> with aria-label and no role, which axe
+    # lets pass only once it holds text; not this feature's, reported).
+    found = [v for v in axe_violations(page) if v["targets"] != ["#log"]]  # see below
+    assert not found, "\n".join(f"{v['id']}: {v['help']} {v['targets']}" for v in found)
+    screenshot(page, "debugger-conditional")
+    page.locator("#debug-panel").get_by_role("button", name="Stop").click()
+    expect(page.locator("#console #run-status")).to_have_attribute("data-state", "stopped")
+    expect(status(page)).to_have_text("Ended (stopped)")
+
+
+NASTY = """\
+evil = '<img src=x onerror="window.pwned = 1">'
+things = {"<b>key</b>": [evil, "<script>window.pwned = 2</script>"]}
+
+
+def near(d):
+    close = d < 1.0
+    return close
+
+
+answer = near(0.5)
+print("done", answer)
+"""
+
+
+def test_values_are_text_and_steps_go_into_functions_and_out(bench, appliance, screenshot):
+    page = bench
+    open_program(page, new_program(appliance, "Debug nasty values", NASTY))
+    gutter(page, 10).click()  # answer = near(0.5)
+    debug(page)
+    expect(status(page)).to_have_text("Paused at line 10 (breakpoint)", timeout=30_000)
+    # A program's values are shown as text: a repr that reads as HTML is not made into HTML.
+    evil = variable(page, "evil").locator(".var-value")
+    expect(evil).to_have_text("""'<img src=x onerror="window.pwned = 1">'""")
+    things = page.locator("#debug-globals > li > details").filter(has_text="things")
+    things.locator("summary").first.click()
+    expect(things.locator(".var-name", has_text="['<b>key</b>']")).to_be_visible()
+    things.locator("details summary").first.click()
+    expect(things).to_contain_text("'<script>window.pwned = 2</script>'")
+    add_watch(page, "<i>not python</i>")
+    expect(watch(page, "<i>not python</i>").locator(".watch-error")).to_contain_text("SyntaxError")
+    panel = page.locator("#debug-panel")
+    assert panel.locator("img, b, script, i").count() == 0
+    assert page.evaluate("window.pwned") is None
+    screenshot(page, "debugger-text-only")
+
+    # Step into the function, its locals and the stack; step out; unfolded stays unfolded.
+    page.keyboard.press("F11")
+    expect(status(page)).to_have_text("Paused at line 6 (step)")
+    expect(page.locator("#debug-stack li")).to_have_count(2)
+    expect(page.locator("#debug-stack li").first).to_contain_text("near")
+    expect(page.locator("#debug-locals .var-name").first).to_have_text("d")
+    page.keyboard.press("Shift+F11")
+    expect(status(page)).to_have_text(re.compile(r"Paused at line (7|10|11) \(step\)"))
+    expect(page.locator("#debug-stack li")).to_have_count(1)
+    expect(things.locator("details").first).to_have_attribute("open", "")
+    page.keyboard.press("F8")
+    expect(page.locator("#console #run-status")).to_have_attribute("data-state", "finished")
+    expect(page.locator("#console #log-lines .ln.o")).to_have_text(["done True"])

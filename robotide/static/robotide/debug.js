@@ -50,8 +50,14 @@
       STEPS.forEach(function (name) { buttons[name].disabled = !paused; });
       buttons.pause.disabled = state !== "running";
       buttons.stop.disabled = ["running", "paused"].indexOf(state) < 0;
-      code.classList.toggle("debugging", state !== "idle");
-      if (window.robotideEditor) window.robotideEditor.refresh();  // its width changed
+      var debugging = state !== "idle";
+      code.classList.toggle("debugging", debugging);
+      var editor = window.robotideEditor;
+      if (editor && editor.getOption("lineWrapping") !== debugging) {
+        // Narrower beside the panel: long lines wrap rather than hide the paused line's end.
+        editor.setOption("lineWrapping", debugging);
+        editor.refresh();
+      }
     }
     function say(text) { statusLine.textContent = text; }
 
