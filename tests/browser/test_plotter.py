@@ -10,7 +10,7 @@ from playwright.sync_api import Page, expect
 
 from tests.browser.conftest import SCREENSHOTS
 from tests.browser.test_accessibility import AXE, AXE_URL, axe_violations
-from tests.browser.test_pages import sign_in
+from tests.browser.test_pages import set_editor_text, sign_in
 from tests.browser.test_workbench import new_program, open_bench
 
 PAIRS = """\
@@ -272,3 +272,26 @@ def test_history_and_zoom_go_back_and_resume_follows(page, appliance):
     expect(resume).to_have_attribute("aria-pressed", "true")
     resume.click()
     page.wait_for_function("(max) => window.robotidePlotter.view().max === max", arg=live["max"])
+
+
+def test_a_new_run_starts_a_new_plot(page, appliance):
+    run(page, appliance, "Plot again", PAIRS)
+    wait_for_values(page, "range", 5)
+    finished(page)
+    first = plotted(page, "run()")
+    set_editor_text(page, COLUMNS)
+    page.get_by_role("button", name="Save and run").click()
+    page.wait_for_function("(first) => window.robotidePlotter.run() !== first", arg=first)
+    assert wait_for_values(page, "value 1", 3) == [1, 2, 3]
+    assert plotted(page, "series()") == ["value 1", "value 2"]  # range is gone
+    finished(page)
+    second = plotted(page, "run()")
+    set_editor_text(page, WORDS)
+    page.get_by_role("button", name="Save and run").click()
+    page.wait_for_function("(second) => window.robotidePlotter.run() !== second", arg=second)
+    finished(page)
+    expect(page.locator("#console #log-lines .ln.o")).to_have_text(
+        ["hello", "countdown 3", "turned 90 degrees"]
+    )
+    expect(page.locator("#plotter")).to_be_hidden()
+    assert plotted(page, "points()") == 0

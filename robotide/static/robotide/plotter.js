@@ -57,12 +57,17 @@
     return template.replace(/%\((\w+)\)s/g, function (all, key) { return key in values ? values[key] : all; });
   }
 
-  function seconds(value) { return value == null ? "—" : value.toFixed(2); }
+  // Numbers as the page's language writes them (1,5 in pt-BR); the CSV keeps Python's 1.5.
+  var language = document.documentElement.lang || undefined;
+  var secondsFormat = new Intl.NumberFormat(language, { minimumFractionDigits: 2, maximumFractionDigits: 2 });
+  var valueFormat = new Intl.NumberFormat(language, { maximumFractionDigits: 3 });
+
+  function seconds(value) { return value == null ? "—" : secondsFormat.format(value); }
 
   function shortNumber(value) {
     if (value == null) return "—";
     var abs = Math.abs(value);
-    return abs !== 0 && (abs >= 1e6 || abs < 1e-3) ? value.toExponential(3) : String(Math.round(value * 1000) / 1000);
+    return abs !== 0 && (abs >= 1e6 || abs < 1e-3) ? value.toExponential(3) : valueFormat.format(value);
   }
 
   document.addEventListener("DOMContentLoaded", function () {
