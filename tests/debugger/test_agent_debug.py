@@ -235,3 +235,11 @@ async def test_the_events_reach_the_runs_websocket_as_json(sim_agent):
         seen = await comm.receive_from()
     assert json.loads(seen) == {"debug": {"state": "running"}}
     await comm.disconnect()
+
+
+async def test_blocks_that_cannot_run_fail_as_in_a_plain_run(sim_agent):
+    robot, ada = await lab()
+    run = await start(ada, robot, source="{not json", debug=SPEC, language="blocks")
+    run = await ended(run)
+    log = run.log_path.read_text()
+    assert run.exit_code == 1 and "not valid JSON" in log, log
