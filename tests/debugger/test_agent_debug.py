@@ -170,7 +170,6 @@ async def test_at_events_are_said_on_a_change_at_most_ten_times_a_second(sim_age
     assert all(event["state"] == "at" for event in said)
     assert len(lines) == len(set(lines))  # only on a change
     assert len(said) <= 1 + elapsed / 0.1  # at most 10 a second
-    assert len(said) < 39  # many polls, few events
 
 
 async def test_the_emergency_stop_ends_a_paused_run_and_its_wait(sim_agent):
