@@ -180,13 +180,14 @@ def test_two_columns_are_two_series(page, appliance):
     finished(page)
 
 
-def test_a_shown_number_is_a_series(page, appliance):
+def test_a_shown_number_is_a_series(page, appliance, screenshot):
     run(page, appliance, "Plot shows", SHOWS)
     values = wait_for_values(page, "show: range", 3)
     assert set(values) <= {i / 2 for i in range(30)}
     assert len(set(values)) >= 2  # it changed while sampled
     expect(page.locator("#plotter")).to_be_visible()
     finished(page)
+    page.locator("#plotter").screenshot(path=SCREENSHOTS / "plotter-shows-section.png")
 
 
 def test_export_csv_holds_the_values(page, appliance):
