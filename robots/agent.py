@@ -1022,8 +1022,8 @@ def flat_units(specs: dict) -> dict[str, str]:
 
 def blocks_mapped(language, filename: str, source: str) -> tuple[str, str, list | None]:
     """A blocks program to run under the debugger: (file name, its Python, the block of each
-    line, 1-based, as robots.debugger counts them), made in a worker; if the blocks cannot
-    run, the program that fails saying why, as a plain run has it, and no map."""
+    of its lines, the first at 0), made in a worker; if the blocks cannot run, the program
+    that fails saying why, as a plain run has it, and no map."""
     name = str(Path(filename).with_suffix(language.compiled_extension))
     try:
         python, blocks = blocks_worker.to_python_mapped(source)

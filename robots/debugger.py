@@ -41,8 +41,12 @@ class RunDebugger:
 
     def __init__(self, agent, run_id: int, spec: dict, filename: str, source_map=None):
         self.agent, self.run_id, self.filename = agent, run_id, filename
-        # A blocks program's map: line i (1-based) of its Python -> the block that made it.
+        # A blocks program's map: the block that made each line of its Python (line i at i-1).
         self.source_map: list[str | None] | None = source_map
+        self.first_lines: dict[str, int] = {}  # block -> the first line it made
+        for number, made_by in reversed(list(enumerate(source_map or (), start=1))):
+            if made_by is not None:
+                self.first_lines[made_by] = number
         self.breakpoints: list[dict] = list(spec.get("breakpoints", []))  # as the page says
         self.watches: list[str] = list(spec.get("watches", []))
         self.started = False
@@ -78,10 +82,7 @@ class RunDebugger:
         return lines
 
     def first_line_of(self, block: str) -> int | None:
-        for number, made_by in enumerate(self.source_map or (), start=1):
-            if made_by == block:
-                return number
-        return None
+        return self.first_lines.get(block)
 
     def block_at(self, line) -> str | None:
         if self.source_map is None or type(line) is not int or not 0 < line <= len(self.source_map):
