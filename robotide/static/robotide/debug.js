@@ -203,7 +203,9 @@
       values.now = {};
       setState("paused");
       var reason = REASONS[pause.reason] || pause.reason || "";
-      say(interpolate(gettext("Paused at line %(line)s (%(reason)s)"), {line: pause.line, reason: reason}, true));
+      var words = event.block ? gettext("Paused at the highlighted block: line %(line)s of its Python (%(reason)s)")
+                              : gettext("Paused at line %(line)s (%(reason)s)");
+      say(interpolate(words, {line: pause.line, reason: reason}, true));
       exceptionLine.hidden = !pause.exception;
       exceptionLine.textContent = pause.exception || "";
       if (breakpoints()) breakpoints().show({line: pause.line, block: event.block}, true);
