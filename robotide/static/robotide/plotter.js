@@ -92,13 +92,15 @@
     var startedAt = 0;  // performance.now() when the run appeared
     var times = [];
     var names = [];
-    var columns = {};  // name -> values (null where a row has none), as long as times
+    // name -> values (null where a row has none), as long as times. No prototype: a program
+    // may well print "constructor: 3".
+    var columns = Object.create(null);
     var linesRead = 0;  // of the run's #log-lines
 
     function reset() {
       times = [];
       names = [];
-      columns = {};
+      columns = Object.create(null);
       droppedNote.hidden = tooManyNote.hidden = true;
       follow(true);
       rebuild();
@@ -120,7 +122,7 @@
     }
 
     function record(pairs) {
-      var row = {};
+      var row = Object.create(null);
       var added = false;
       pairs.forEach(function (pair) {
         var name = pair[0];
