@@ -110,6 +110,8 @@ class Peer:
         self.calls.append((method, params))
         if method == "sensors":
             return self.sensors()
+        if method == "sensor":
+            return self.sensors()[params[0]]
         if method == "drive":
             return {"linear": params[0], "angular": params[1] if len(params) > 1 else 0.0}
         if method in ("stop", "show"):

@@ -287,6 +287,20 @@ def test_breakpoints_added_while_running_pause_the_running_loop(debug):
     assert debuggee.finish()[0] == 0
 
 
+def test_a_blocks_programs_python_says_its_lines_and_pauses_on_a_blocks_line(debug):
+    from programs.blocks import to_python_mapped
+
+    code, blocks = to_python_mapped((ROOT / "programs" / "examples" / "wall.json").read_text())
+    show = blocks.index("wall-show") + 1  # the first line the block made
+    peer, debuggee = debug(code, report_line=0.05, start=1.0, step=0)
+    wait_for_line(peer, {show, blocks.index("wall-wait") + 1})  # where it runs, said
+    peer.change(breakpoints=[point(show)])
+    state = peer.paused()
+    assert (state["reason"], state["line"]) == ("breakpoint", show)
+    peer.answer("stop")
+    assert debuggee.finish() == (0, "", "")
+
+
 def test_polls_report_the_line_as_often_as_asked(debug):
     peer, debuggee = debug(FOREVER, step=0, report_line=0.05)
     wait_for_line(peer, {line_of(FOREVER, "count += 1") - 1, line_of(FOREVER, "count += 1")})
@@ -342,6 +356,13 @@ def test_a_crash_whose_pause_the_run_ends_still_says_its_traceback(debug, tmp_pa
     peer.paused()
     peer.answer(CLOSE)
     assert debuggee.finish() == (1, "", plain(tmp_path / "program.py").stderr)
+
+
+def test_a_syntax_error_is_said_as_python_says_it(debug, tmp_path):
+    peer, debuggee = debug("x = (\n")
+    expected = plain(tmp_path / "program.py")
+    assert debuggee.finish() == (1, "", expected.stderr)
+    assert "SyntaxError" in expected.stderr
 
 
 @pytest.mark.parametrize(

@@ -657,10 +657,12 @@ def main(argv=None):
     try:
         with io.open_code(filename) as source:
             code = compile(source.read(), filename, "exec")
-    except OSError as error:
-        print(f"python3: can't open file {argv[0]!r}: {error}", file=sys.stderr)
+    except OSError as error:  # said as python3 says it
+        said = f"can't open file {filename!r}: [Errno {error.errno}] {error.strerror}"
+        print(f"{sys.executable}: {said}", file=sys.stderr)
         sys.exit(USAGE_STATUS)
     except SyntaxError as error:
+        error.__traceback__ = None  # the debugger's own frames are not the program's
         sys.excepthook(type(error), error, None)
         sys.exit(1)
     try:
