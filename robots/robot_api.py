@@ -90,7 +90,6 @@ class RobotApi:
             "receive": self.receive,
             "memory_set": self.memory_set,
             "memory_get": self.memory_get,
-            **debugger.METHODS,  # a run under the debugger (robots.debugger)
         }
         # These belong to the connection: they are given its session.
         self.per_connection = {self.subscribe, self.receive, *debugger.METHODS.values()}
@@ -122,7 +121,9 @@ class RobotApi:
             raise RpcError(UNAUTHORIZED, "not authenticated: call auth with $ROBOT_TOKEN first")
         if self.agent.tokens.get(active.token) is not active:
             raise RpcError(UNAUTHORIZED, "this run has ended: its token is no longer valid")
-        handler = self.methods.get(method)
+        # The debugger's (robots.debugger) are not the programs' API (programs.robot_api_spec):
+        # a run's debugger calls them, answered -32000 for a run not under the debugger.
+        handler = self.methods.get(method) or debugger.METHODS.get(method)
         if handler is None:
             known = ", ".join(sorted(self.methods))
             raise RpcError(METHOD_NOT_FOUND, f"no method {method!r}; methods: {known}")
