@@ -234,6 +234,7 @@
       var canvas = chart.root.querySelector("canvas");
       canvas.setAttribute("role", "img");
       canvas.setAttribute("aria-label", chartBox.dataset.label);
+      canvas.setAttribute("aria-describedby", "plotter-summary");
       chart.over.addEventListener("mouseleave", function () { setTimeout(latestInLegend, 0); });
       draw(true);
     }
