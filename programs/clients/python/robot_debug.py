@@ -412,7 +412,11 @@ class Debugger(bdb.Bdb):
             self.interact(frame, reason, error)
         elif self.stoplineno == -1 and id(frame.f_code) not in self.traced:
             frame.f_trace = None  # continuing, no breakpoint here: no more line events
-            return None
+            # ...unless debug_poll's thread asked for them meanwhile (it sets `traced` or
+            # `pause_requested` before it looks at the frames' f_trace).
+            if id(frame.f_code) not in self.traced and not self.pause_requested:
+                return None
+            frame.f_trace = self.trace_dispatch
         return self.trace_dispatch
 
     def dispatch_return(self, frame, arg):
