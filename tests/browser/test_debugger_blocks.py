@@ -9,7 +9,10 @@ import re
 import pytest
 from playwright.sync_api import Page, expect
 
-from tests.browser.test_pages import sign_in
+from tests.browser.test_pages import (
+    _no_runs_left,  # noqa: F401 (autouse: a failed test's run stopped)
+    sign_in,
+)
 
 WALL = "Stop before the wall (Blocks)"
 LOOP_BLOCKS = ["wall-until", "wall-compare", "wall-range", "wall-show", "wall-wait"]
@@ -66,7 +69,9 @@ def test_a_blocks_program_shows_its_running_block_and_stops_on_a_block_breakpoin
     )
     # At the wall it pauses on the breakpoint's block, highlighted.
     status = page.locator("#debug-status")
-    expect(status).to_have_text(re.compile(r"Paused at the highlighted block: line \d+ of its Python \(breakpoint\)"))
+    expect(status).to_have_text(
+        re.compile(r"Paused at the highlighted block: line \d+ of its Python \(breakpoint\)")
+    )
     assert highlighted(page) == ["wall-stop"]
     sensors = appliance.api("GET", "/api/robots/sim/sensors").json()
     assert sensors["velocity"]["linear"] == 0.0 and sensors["range"] < 0.5, sensors

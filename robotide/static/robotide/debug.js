@@ -148,7 +148,9 @@
         STEPS.forEach(function (step) { buttons[step].disabled = true; });
         buttons.pause.disabled = true;
       }
+      var pauses = session.pauses;
       post({command: name}).then(function (taken) {
+        if (session.pauses !== pauses) return;  // the next pause came before the answer did
         if (!taken) { if (session.state === "paused") setState("paused"); return; }
         if (STEPS.indexOf(name) >= 0 && session.state === "paused") running();
       });
@@ -200,6 +202,7 @@
       if (session.resumed) values.before = values.now;
       session.resumed = false;
       session.pause = pause;
+      session.pauses = (session.pauses || 0) + 1;
       values.now = {};
       setState("paused");
       var reason = REASONS[pause.reason] || pause.reason || "";
