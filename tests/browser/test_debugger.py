@@ -238,6 +238,7 @@ def test_stop_before_the_wall_pauses_in_its_loop_and_steps(bench, appliance, scr
     # A watch added while paused: the debugger evaluates it, the pause is said again.
     add_watch(page, "distance < STOP_AT")
     expect(watch(page, "distance < STOP_AT").locator(".var-value")).to_have_text("False")
+    expect(watch(page, "distance < STOP_AT").locator(".changed")).to_have_count(0)  # just added
     assert velocity(appliance) == 0.0
     screenshot(page, "debugger-watch")
 
@@ -372,6 +373,12 @@ def test_values_are_text_and_steps_go_into_functions_and_out(bench, appliance, s
     expect(page.locator("#debug-stack li")).to_have_count(2)
     expect(page.locator("#debug-stack li").first).to_contain_text("near")
     expect(page.locator("#debug-locals .var-name").first).to_have_text("d")
+    page.keyboard.press("F10")
+    expect(status(page)).to_have_text("Paused at line 7 (step)")
+    close = variable(page, "close")
+    expect(close.locator(".var-value")).to_have_text("True")
+    expect(close).to_have_class(re.compile(r"\bchanged\b"))  # new since the last pause
+    expect(variable(page, "d")).not_to_have_class(re.compile(r"\bchanged\b"))
     page.keyboard.press("Shift+F11")
     expect(status(page)).to_have_text(re.compile(r"Paused at line (7|10|11) \(step\)"))
     expect(page.locator("#debug-stack li")).to_have_count(1)

@@ -59,6 +59,19 @@ def test_a_blocks_program_shows_its_running_block_and_stops_on_a_block_breakpoin
         {"block": "wall-stop", "condition": None}
     ]
 
+    # F9 on the selected block: on, and off again.
+    page.evaluate(
+        "Blockly.common.setSelected(window.robotideBlocksEditor.workspace.getBlockById('wall-print'))"
+    )
+    page.keyboard.press("F9")
+    expect(page.locator('#blocks-area g[data-id="wall-print"]')).to_have_class(
+        re.compile(r"robotide-breakpoint-block")
+    )
+    page.keyboard.press("F9")
+    assert page.evaluate("window.robotideBreakpoints.list()") == [
+        {"block": "wall-stop", "condition": None}
+    ]
+
     page.get_by_role("button", name="Debug", exact=True).click()
     # While it drives, the block it runs is highlighted (the loop's).
     page.wait_for_function(

@@ -277,7 +277,9 @@
                   element("code", "var-value", variable.value));
       values.now[path] = variable.type + ":" + variable.value;
       var hadPause = Object.keys(values.before).length > 0;
-      if (hadPause && values.before[path] !== values.now[path]) {
+      // A watch just added is new, not changed; a variable new since the last pause is.
+      var fresh = !(path in values.before);
+      if (hadPause && values.before[path] !== values.now[path] && !(fresh && path.lastIndexOf("w:", 0) === 0)) {
         line.classList.add("changed");
         line.append(element("span", "var-changed", gettext("changed")));
       }
