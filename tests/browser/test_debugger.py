@@ -386,3 +386,33 @@ def test_values_are_text_and_steps_go_into_functions_and_out(bench, appliance, s
     page.keyboard.press("F8")
     expect(page.locator("#console #run-status")).to_have_attribute("data-state", "finished")
     expect(page.locator("#console #log-lines .ln.o")).to_have_text(["done True"])
+
+
+COUNTING = """\
+import time
+
+i = 0
+while True:
+    i += 1
+    time.sleep(0.05)
+"""
+
+
+def test_pause_a_running_program_then_go_on(bench, appliance):
+    page = bench
+    open_program(page, new_program(appliance, "Debug counting", COUNTING))
+    debug(page)  # no breakpoint: it runs
+    expect(status(page)).to_have_text("Running")
+    expect(command_button(page, "pause")).to_be_enabled()
+    expect(command_button(page, "continue")).to_be_disabled()
+    command_button(page, "pause").click()
+    expect(status(page)).to_have_text(re.compile(r"Paused at line [4-6] \(paused\)"))
+    count = int(variable(page, "i").locator(".var-value").inner_text())
+    expect(command_button(page, "pause")).to_be_disabled()
+    page.keyboard.press("F8")  # continue
+    expect(status(page)).to_have_text("Running")
+    page.keyboard.press("F8")  # and pause again
+    expect(status(page)).to_have_text(re.compile(r"Paused at line [4-6] \(paused\)"))
+    assert int(variable(page, "i").locator(".var-value").inner_text()) >= count
+    command_button(page, "stop").click()
+    expect(page.locator("#console #run-status")).to_have_attribute("data-state", "stopped")
