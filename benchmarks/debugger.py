@@ -231,6 +231,7 @@ def paused_line(app, hits: int) -> list[Figure]:
         browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
         # bypass_csp: the page's CSP forbids the eval behind wait_for_function.
         page = browser.new_context(base_url=app.url, bypass_csp=True).new_page()
+        page.on("pageerror", lambda error: say(f"[{BENCH}] page error: {error}"))
         sign_in(page)
         load_to_editable(page, program_id)
         set_breakpoint(page, line)
@@ -275,8 +276,12 @@ def hit_times(app, run_id: int) -> list[float]:
 def run(rounds: int = ROUNDS, hits: int = HITS, browser: bool = True) -> list[Figure]:
     with appliance(BENCH) as app:
         figures = overhead(app, rounds)
+        print_table(figures, f"{BENCH} (a)")  # kept if (b) cannot run
         if browser:
-            figures += paused_line(app, hits)
+            try:
+                figures += paused_line(app, hits)
+            except Exception as exc:
+                figures.append(Figure(BENCH, "(b) could not run", None, "", note=repr(exc)[:300]))
     return figures
 
 
