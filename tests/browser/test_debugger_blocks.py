@@ -86,6 +86,7 @@ def test_a_blocks_program_shows_its_running_block_and_stops_on_a_block_breakpoin
         re.compile(r"Paused at the highlighted block: line \d+ of its Python \(breakpoint\)")
     )
     assert highlighted(page) == ["wall-stop"]
+    expect(page.locator("#blocks-python .debug-line")).to_have_text("bot.stop()")  # its Python
     sensors = appliance.api("GET", "/api/robots/sim/sensors").json()
     assert sensors["velocity"]["linear"] == 0.0 and sensors["range"] < 0.5, sensors
     for width in (1280, 390):
@@ -100,3 +101,4 @@ def test_a_blocks_program_shows_its_running_block_and_stops_on_a_block_breakpoin
     expect(console.locator("#log-lines .ln.o").last).to_contain_text("m before the wall")
     expect(status).to_have_text("Ended (finished)")
     page.wait_for_function("window.robotideBlocksEditor.workspace.highlightedBlocks.length === 0")
+    expect(page.locator("#blocks-python .debug-line")).to_have_count(0)

@@ -49,6 +49,27 @@
   var BREAKPOINT_CLASS = "robotide-breakpoint-block";
   var MENU_ITEM = "robotide-toggle-breakpoint";
 
+  // The line of the Python pane the program is at, marked as the text editor marks it (the
+  // pane's text is the Python the debugger runs); none: the pane as plain text again.
+  function markPythonLine(line) {
+    var pane = document.getElementById("blocks-python");
+    if (!pane || pane.classList.contains("error")) return;
+    var text = pane.textContent;
+    pane.textContent = "";
+    if (!line) { pane.textContent = text; return; }
+    var lines = text.split("\n");
+    lines.forEach(function (content, index) {
+      var span = document.createElement("span");
+      span.textContent = content + (index < lines.length - 1 ? "\n" : "");
+      if (index + 1 === line) span.className = "debug-line";
+      pane.append(span);
+    });
+    var current = pane.querySelector(".debug-line");
+    if (!current) return;
+    var box = pane.getBoundingClientRect(), at = current.getBoundingClientRect();
+    if (at.top < box.top || at.bottom > box.bottom) pane.scrollTop += at.top - box.top - box.height / 2;
+  }
+
   function blockBreakpoints(workspace, programId) {
     var key = "robotide-breakpoints-" + programId;
     var ids = [];
@@ -108,6 +129,7 @@
       onChange: function (listener) { listeners.push(listener); },
       // The running block ({block: id}), highlighted; a pause's also brought into view.
       show: function (where, paused) {
+        markPythonLine(where && where.line);
         var id = where && where.block && workspace.getBlockById(where.block) ? where.block : null;
         if (id === shown && !paused) return;
         shown = id;
