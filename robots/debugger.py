@@ -7,7 +7,11 @@ as "run.debug" messages (programs.views_debug), and the agent tells the run's vi
 debugger does as "run.debug" events on the run's group (programs.consumers.RunConsumer).
 
 A pause is a motion stop: while the debugger waits in debug_paused the run's motion is stopped
-and its drive() refused (RobotApi.drive), until a command lets it go on.
+and its drive() refused (RobotApi.drive), until a command lets it go on. Continue gives the robot
+back the motion the pause stopped (the run's last drive, if the run still holds the robot), before
+the program goes on: a program that drives once and then watches its sensors, as most do, must
+not find its robot standing for good after a pause. Steps leave it stopped: a line stepped over
+runs with the robot still, where a student can follow what it reads.
 """
 
 from __future__ import annotations
@@ -18,7 +22,9 @@ import logging
 import math
 import time
 
+import rhal
 from robots.bus import run_group
+from robots.lease import Holder, LeaseHeld
 from robots.rpc import INVALID_PARAMS, ROBOT_ERROR, RpcError, bind_params
 
 log = logging.getLogger(__name__)
@@ -62,6 +68,9 @@ class RunDebugger:
         self._at_later: asyncio.TimerHandle | None = None
         self._at_pending: int | None = None
         self.closed = False
+        # The run's last drive (linear, angular) while it ran, and the one a pause stopped.
+        self.motion: tuple[float, float] | None = None
+        self.stopped_motion: tuple[float, float] | None = None
 
     # -- what the debugger in the box is given ----------------------------------------------
 
@@ -113,6 +122,9 @@ class RunDebugger:
         self.waiter = asyncio.get_running_loop().create_future()
         self.waiter_session = session
         waiter = self.waiter
+        # What Continue gives back: its motion, if the robot followed the run's commands.
+        following = self.agent.motion_owner == self.run_id
+        self.stopped_motion = self.motion if following else None
         await self.agent.stop_motion_of(self.run_id)  # the lease stays the run's
         block = self.block_at(state.get("line"))
         self.tell({"state": "paused", "paused": state, "block": block})
@@ -193,7 +205,9 @@ class RunDebugger:
             self.agent.stop_run(self.run_id, "stopped by user")
             self.answer("stop")
         elif self.waiter is not None:  # paused
-            if command in RESUMING:
+            if command == "continue" and self.stopped_motion is not None:
+                asyncio.ensure_future(self._continue_moving(self.waiter))
+            elif command in RESUMING:
                 self.answer(command)
             elif command == "update":
                 self.answer("update")  # it says the pause again, watches evaluated anew
@@ -201,6 +215,31 @@ class RunDebugger:
             self.pause_asked = True
         if self.due():
             self.wake_polls()
+
+    # -- motion: what a pause stops and Continue gives back --------------------------------
+
+    def moved(self, linear: float, angular: float) -> None:
+        """The run drove (RobotApi.drive): what a pause would stop."""
+        self.motion = (linear, angular)
+
+    def stopped(self) -> None:
+        """The run stopped its robot itself (RobotApi.stop)."""
+        self.motion = None
+
+    async def _continue_moving(self, waiter: asyncio.Future) -> None:
+        """Continue: the motion the pause stopped, then the program goes on (it cannot drive
+        meanwhile: it waits for this answer). Not if the run no longer holds the robot (staff
+        took it, the emergency stop): the robot stays as they left it."""
+        motion, self.stopped_motion = self.stopped_motion, None
+        active = self.agent.runs.get(self.run_id)
+        if active is not None and self.agent.lease.holds(self.run_id):
+            try:
+                await self.agent.drive_for(Holder("run", self.run_id, active.user), *motion)
+                self.motion = motion
+            except (LeaseHeld, rhal.RhalError, ValueError) as exc:
+                log.info("run %s: its motion not given back after a pause: %s", self.run_id, exc)
+        if self.waiter is waiter:  # not ended or answered meanwhile
+            self.answer("continue")
 
     def answer(self, command: str) -> None:
         """The waiting debug_paused answers `command`; the robot may move again unless it is

@@ -170,6 +170,8 @@ class RobotApi:
         if paused is not None and paused.paused:  # paused while it was on its way
             await self.agent.stop_motion_of(active.run_id)
             raise RpcError(ROBOT_ERROR, debugger.PAUSED_HERE)
+        if paused is not None:  # what a pause stops, and Continue gives back
+            paused.moved(linear, 0.0 if angular is None else angular)
         return applied
 
     async def stop(self, active, params):
@@ -178,6 +180,8 @@ class RobotApi:
         # with whoever controls them (stopping is never an error).
         if self.agent.lease.holder is None or self.agent.lease.holds(active.run_id):
             await self.agent.driver.stop()
+        if (debugged := getattr(active, "debugger", None)) is not None:
+            debugged.stopped()
         return None
 
     async def sensors(self, active, params):

@@ -79,8 +79,41 @@ async def test_a_pause_stops_the_robot_and_its_drive_until_continue(sim_agent):
         await command(sim_agent, run, "continue")
         assert await answer == {"command": "continue", **{k: SPEC[k] for k in SPEC}}
         assert await events.next() == {"state": "running"}
-    await call(program, "drive", 0.3, 0.0)  # it may move again
-    assert (await sim_agent.driver.sensors())["velocity"]["linear"] > 0
+        # Continue gave the robot back the motion the pause stopped, before the program
+        # went on (wall.py drives once, then watches its range)
+        assert (await sim_agent.driver.sensors())["velocity"]["linear"] == pytest.approx(0.3)
+    await call(program, "drive", 0.1, 0.0)  # it may drive again
+    assert (await sim_agent.driver.sensors())["velocity"]["linear"] == pytest.approx(0.1)
+
+
+async def test_a_step_leaves_the_robot_stopped_and_a_stopped_run_stays_so(sim_agent):
+    _, run, active = await debug_run(sim_agent)
+    program, debugger = await connect(sim_agent, active), await connect(sim_agent, active)
+    await call(program, "drive", 0.3, 0.0)
+    answer = pausing(debugger, state(3))
+    await until(lambda: active.debugger.paused)
+    await command(sim_agent, run, "step_over")  # a stepped line runs with the robot still
+    assert (await answer)["command"] == "step_over"
+    assert (await sim_agent.driver.sensors())["velocity"]["linear"] == 0.0
+    await call(program, "stop")  # the program stopped it itself: Continue gives nothing back
+    answer = pausing(debugger, state(4))
+    await until(lambda: active.debugger.paused)
+    await command(sim_agent, run, "continue")
+    assert (await answer)["command"] == "continue"
+    assert (await sim_agent.driver.sensors())["velocity"]["linear"] == 0.0
+
+
+async def test_continue_gives_no_motion_back_to_a_run_that_lost_the_robot(sim_agent):
+    _, run, active = await debug_run(sim_agent)
+    program, debugger = await connect(sim_agent, active), await connect(sim_agent, active)
+    await call(program, "drive", 0.3, 0.0)
+    answer = pausing(debugger, state(3))
+    await until(lambda: active.debugger.paused)
+    await send_to_agent(sim_agent.name, "robot.take_control", owner="staff.channel", user="staff")
+    await until(lambda: not sim_agent.lease.holds(run.pk))
+    await command(sim_agent, run, "continue")
+    assert (await answer)["command"] == "continue"
+    assert (await sim_agent.driver.sensors())["velocity"]["linear"] == 0.0
 
 
 async def test_the_pages_commands_answer_the_pause(sim_agent):
