@@ -50,7 +50,11 @@
       STEPS.forEach(function (name) { buttons[name].disabled = !paused; });
       buttons.pause.disabled = state !== "running";
       buttons.stop.disabled = ["running", "paused"].indexOf(state) < 0;
-      var debugging = state !== "idle";
+      layout();
+    }
+    // Debugging, the panel beside the editor (under it on narrow screens): see debug.css.
+    function layout() {
+      var debugging = session.state !== "idle" && !panel.hidden;
       code.classList.toggle("debugging", debugging);
       var editor = window.robotideEditor;
       if (editor && editor.getOption("lineWrapping") !== debugging) {
@@ -108,7 +112,7 @@
     debugButton.addEventListener("click", debug);
     document.getElementById("debug-hide").addEventListener("click", function () {
       panel.hidden = true;
-      if (!live()) setState("idle");
+      if (!live()) setState("idle"); else layout();
       debugButton.focus();
     });
 
@@ -204,6 +208,7 @@
       session.pause = pause;
       session.pauses = (session.pauses || 0) + 1;
       values.now = {};
+      panel.hidden = false;  // hidden while it ran: a pause shows it again
       setState("paused");
       var reason = REASONS[pause.reason] || pause.reason || "";
       var words = event.block ? gettext("Paused at the highlighted block: line %(line)s of its Python (%(reason)s)")
