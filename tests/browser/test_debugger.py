@@ -254,8 +254,9 @@ def test_stop_before_the_wall_pauses_in_its_loop_and_steps(bench, appliance, scr
 
 @pytest.mark.xfail(
     strict=True,
-    reason="robots.debugger: a pause stops the robot and Continue does not give the run its"
-    " drive back; wall.py drives once, before its loop, so it never reaches the wall (reported)",
+    reason="robots.debugger (437fb02) gives the motion back on Continue only from the pause that"
+    " stopped it: a pause said again after an update (a watch added, a breakpoint moved) or a"
+    " step's pause records none, so wall.py stands for good (reported)",
 )
 def test_stop_before_the_wall_continues_to_its_end(bench, appliance):
     page = bench
