@@ -194,7 +194,7 @@ def overhead(app, rounds: int) -> list[Figure]:
 # The program's place in the editor (editor.js: a line class on the paused line's wrapper; it
 # goes when the program runs on). Each time one appears: Date.now() and its line's number.
 PAUSED_LINE = ".CodeMirror-code .debug-line"
-WATCH_PAUSES = """(selector) => {
+WATCH_PAUSES = r"""(selector) => {
   window.__paused = [];
   let shown = null;
   const note = () => {
@@ -207,6 +207,14 @@ WATCH_PAUSES = """(selector) => {
   };
   new MutationObserver(note).observe(document.body,
     {subtree: true, childList: true, attributes: true, attributeFilter: ["class"]});
+  // A pause's message on the console's websocket, noted before the page's own listeners
+  // (capture, on window): the split between the way there and the page's drawing.
+  window.__arrived = [];
+  window.addEventListener("htmx:wsBeforeMessage", (event) => {
+    const text = event.detail.message;
+    if (typeof text === "string" && text.startsWith('{"debug"') &&
+        /"state":\s*"paused"/.test(text)) window.__arrived.push(Date.now());
+  }, true);
 }"""
 CONTINUE = '#debug-panel button[data-command="continue"]'
 STOP = '#debug-panel button[data-command="stop"]'
@@ -241,7 +249,7 @@ def paused_line(app, hits: int) -> list[Figure]:
         seen = 0
         while len(shown) < hits:
             page.wait_for_function(f"window.__paused.length > {seen}", timeout=RUN_TIMEOUT * 1000)
-            pause = page.evaluate(f"window.__paused[{seen}]")
+            pause = page.evaluate(f"[...window.__paused[{seen}], window.__arrived[{seen}]]")
             seen += 1
             if pause[1] == line:  # not a pause elsewhere (a debugger's entry, say)
                 shown.append(pause)
@@ -250,8 +258,13 @@ def paused_line(app, hits: int) -> list[Figure]:
         page.locator(STOP).click()
         browser.close()
     printed = hit_times(app, run_id)
-    delays = [at - printed[k] * 1000 for k, (at, _) in enumerate(shown) if k < len(printed)]
+    hit = [(at, arrived, printed[k] * 1000) for k, (at, _, arrived) in enumerate(shown)
+           if k < len(printed)]  # fmt: skip
+    delays = [at - sent for at, _, sent in hit]
+    way = [arrived - sent for _, arrived, sent in hit if arrived is not None]
+    drawing = [at - arrived for at, arrived, _ in hit if arrived is not None]
     say(f"[{BENCH}] hit -> paused line shown, ms: {[round(d, 1) for d in delays]}")
+    say(f"[{BENCH}] of which hit -> message at the page: {[round(d, 1) for d in way]}")
     return [
         Figure(BENCH, "breakpoint hit -> paused line shown, p50", percentile(delays, 50), "ms"),
         Figure(BENCH, "breakpoint hit -> paused line shown, p95", percentile(delays, 95), "ms"),
@@ -263,6 +276,14 @@ def paused_line(app, hits: int) -> list[Figure]:
             note=f"{len(delays)} hits, Continue clicked between them; {seen - len(shown)} other"
             " pauses",
         ),
+        Figure(BENCH, "of which hit -> its message at the page, p50", percentile(way, 50), "ms"),
+        Figure(BENCH, "of which hit -> its message at the page, p95", percentile(way, 95), "ms"),
+        Figure(
+            BENCH, "of which message -> line shown (the page), p50", percentile(drawing, 50), "ms"
+        ),  # fmt: skip
+        Figure(
+            BENCH, "of which message -> line shown (the page), p95", percentile(drawing, 95), "ms"
+        ),  # fmt: skip
     ]
 
 
