@@ -17,8 +17,9 @@ headless) on the program's workbench: a breakpoint set by clicking the editor's 
 pressed; the program prints ``time.time()`` just before the breakpoint's line on each of
 HITS passes of its loop; the page notes ``Date.now()`` when the paused line's highlight
 appears (a MutationObserver installed before Debug), and Continue is clicked after each.
-The difference, per hit: p50, p95, max. Both clocks are the machine's (CLOCK_REALTIME; the
-sim runs at 1x, so the run's clock is not scaled).
+The difference, per hit: p50, p95, max; split at the pause's message reaching the page (its
+websocket's message, noted in a capturing listener before the page's own). Both clocks are
+the machine's (CLOCK_REALTIME; the sim runs at 1x, so the run's clock is not scaled).
 
     .venv/bin/python -m benchmarks.debugger [--rounds 7] [--hits 20] [--no-browser]
 
