@@ -412,6 +412,12 @@ def test_pause_a_running_program_then_go_on(bench, appliance):
     expect(command_button(page, "pause")).to_be_disabled()
     page.keyboard.press("F8")  # continue
     expect(status(page)).to_have_text("Running")
+    # A breakpoint set while it runs: the debugger is told, and pauses there.
+    gutter(page, 5).click()
+    expect(status(page)).to_have_text("Paused at line 5 (breakpoint)")
+    gutter(page, 5).click()  # gone again (told while paused)
+    page.keyboard.press("F8")
+    expect(status(page)).to_have_text("Running")
     page.keyboard.press("F8")  # and pause again
     expect(status(page)).to_have_text(re.compile(r"Paused at line [4-6] \(paused\)"))
     assert int(variable(page, "i").locator(".var-value").inner_text()) >= count

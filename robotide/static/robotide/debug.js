@@ -145,6 +145,9 @@
     }
 
     function command(name) {
+      // An update while paused is answered by the pause said again: a step asked meanwhile
+      // waits for it (the debugger, between the two, would not hear it).
+      if (session.repause && STEPS.indexOf(name) >= 0) { session.queued = name; return; }
       if (name === "pause" ? session.state !== "running" : STEPS.indexOf(name) >= 0 && session.state !== "paused") return;
       if (name === "stop" && !live()) return;
       if (name !== "stop") {
@@ -163,7 +166,19 @@
     // Breakpoints or watches changed while the run goes: the debugger is told.
     function update() {
       if (!live() || !session.run) return;
+      if (session.state === "paused") {
+        session.repause = true;
+        clearTimeout(session.repauseTimer);
+        session.repauseTimer = setTimeout(repaused, 5000);  // said again, or not: not stuck
+      }
       post({command: "update", breakpoints: spec().breakpoints, watches: watches.slice()});
+    }
+    function repaused() {
+      clearTimeout(session.repauseTimer);
+      session.repause = false;
+      var queued = session.queued;
+      session.queued = null;
+      if (queued) command(queued);
     }
 
     // -- the events -------------------------------------------------------------------------
@@ -224,6 +239,7 @@
       noVariables.hidden = (pause.locals || []).length + (pause.globals || []).length > 0;
       if (!noVariables.hidden) noVariables.textContent = gettext("No variables yet.");
       showWatches(pause.watches || []);
+      if (session.repause) repaused();
     }
 
     function clearPause() {
