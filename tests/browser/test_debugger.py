@@ -252,12 +252,6 @@ def test_stop_before_the_wall_pauses_in_its_loop_and_steps(bench, appliance, scr
     assert_not_reloaded(page)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="robots.debugger (437fb02) gives the motion back on Continue only from the pause that"
-    " stopped it: a pause said again after an update (a watch added, a breakpoint moved) or a"
-    " step's pause records none, so wall.py stands for good (reported)",
-)
 def test_stop_before_the_wall_continues_to_its_end(bench, appliance):
     page = bench
     first = pause_in_the_loop(page, appliance)
