@@ -8,10 +8,11 @@ debugger does as "run.debug" events on the run's group (programs.consumers.RunCo
 
 A pause is a motion stop: while the debugger waits in debug_paused the run's motion is stopped
 and its drive() refused (RobotApi.drive), until a command lets it go on. Continue gives the robot
-back the motion the pause stopped (the run's last drive, if the run still holds the robot), before
-the program goes on: a program that drives once and then watches its sensors, as most do, must
-not find its robot standing for good after a pause. Steps leave it stopped: a line stepped over
-runs with the robot still, where a student can follow what it reads.
+back the run's motion (its last drive, unless it stopped the robot itself since; if the run still
+holds the robot) before the program goes on: a program that drives once and then watches its
+sensors, as most do, must not find its robot standing for good after a pause. Steps leave it
+stopped: a line stepped over runs with the robot still, where a student can follow what it
+reads (unless the line drives).
 """
 
 from __future__ import annotations
@@ -62,15 +63,18 @@ class RunDebugger:
         self.waiter_session = None
         self.polls: dict[asyncio.Future, object] = {}  # debug_poll waiters -> their session
         self.pause_asked = False
+        # A command that came after an update's answer, before the debugger paused again
+        # (the page's Continue right after adding a watch): the new pause's answer.
+        self.pending: str | None = None
         self.changed = False  # breakpoints or watches the running debugger has not had
         self.at_line: int | None = None  # the last "at" said, and when
         self.at_time = -math.inf
         self._at_later: asyncio.TimerHandle | None = None
         self._at_pending: int | None = None
         self.closed = False
-        # The run's last drive (linear, angular) while it ran, and the one a pause stopped.
+        # The run's last drive (linear, angular), until it stops the robot itself: what
+        # Continue gives back after its pauses and steps.
         self.motion: tuple[float, float] | None = None
-        self.stopped_motion: tuple[float, float] | None = None
 
     # -- what the debugger in the box is given ----------------------------------------------
 
@@ -122,12 +126,12 @@ class RunDebugger:
         self.waiter = asyncio.get_running_loop().create_future()
         self.waiter_session = session
         waiter = self.waiter
-        # What Continue gives back: its motion, if the robot followed the run's commands.
-        following = self.agent.motion_owner == self.run_id
-        self.stopped_motion = self.motion if following else None
         await self.agent.stop_motion_of(self.run_id)  # the lease stays the run's
         block = self.block_at(state.get("line"))
         self.tell({"state": "paused", "paused": state, "block": block})
+        if self.pending is not None:
+            pending, self.pending = self.pending, None
+            self.command(pending)
         try:
             command = await waiter  # cancelled if its connection or the run ends
         finally:
@@ -205,12 +209,14 @@ class RunDebugger:
             self.agent.stop_run(self.run_id, "stopped by user")
             self.answer("stop")
         elif self.waiter is not None:  # paused
-            if command == "continue" and self.stopped_motion is not None:
+            if command == "continue" and self.motion is not None:
                 asyncio.ensure_future(self._continue_moving(self.waiter))
             elif command in RESUMING:
                 self.answer(command)
             elif command == "update":
                 self.answer("update")  # it says the pause again, watches evaluated anew
+        elif self.paused and command in RESUMING:  # between an update's answer and its pause
+            self.pending = command
         elif command == "pause":
             self.pause_asked = True
         if self.due():
@@ -227,15 +233,14 @@ class RunDebugger:
         self.motion = None
 
     async def _continue_moving(self, waiter: asyncio.Future) -> None:
-        """Continue: the motion the pause stopped, then the program goes on (it cannot drive
-        meanwhile: it waits for this answer). Not if the run no longer holds the robot (staff
-        took it, the emergency stop): the robot stays as they left it."""
-        motion, self.stopped_motion = self.stopped_motion, None
-        active = self.agent.runs.get(self.run_id)
-        if active is not None and self.agent.lease.holds(self.run_id):
+        """Continue: the run's motion as its program left it (its last drive), then the
+        program goes on (it cannot drive meanwhile: it waits for this answer). Not if the run
+        no longer holds the robot (staff took it, the emergency stop): the robot stays as
+        they left it."""
+        active, motion = self.agent.runs.get(self.run_id), self.motion
+        if active is not None and motion is not None and self.agent.lease.holds(self.run_id):
             try:
                 await self.agent.drive_for(Holder("run", self.run_id, active.user), *motion)
-                self.motion = motion
             except (LeaseHeld, rhal.RhalError, ValueError) as exc:
                 log.info("run %s: its motion not given back after a pause: %s", self.run_id, exc)
         if self.waiter is waiter:  # not ended or answered meanwhile

@@ -86,7 +86,7 @@ async def test_a_pause_stops_the_robot_and_its_drive_until_continue(sim_agent):
     assert (await sim_agent.driver.sensors())["velocity"]["linear"] == pytest.approx(0.1)
 
 
-async def test_a_step_leaves_the_robot_stopped_and_a_stopped_run_stays_so(sim_agent):
+async def test_steps_leave_the_robot_stopped_continue_does_not_a_stopped_run_stays_so(sim_agent):
     _, run, active = await debug_run(sim_agent)
     program, debugger = await connect(sim_agent, active), await connect(sim_agent, active)
     await call(program, "drive", 0.3, 0.0)
@@ -95,6 +95,15 @@ async def test_a_step_leaves_the_robot_stopped_and_a_stopped_run_stays_so(sim_ag
     await command(sim_agent, run, "step_over")  # a stepped line runs with the robot still
     assert (await answer)["command"] == "step_over"
     assert (await sim_agent.driver.sensors())["velocity"]["linear"] == 0.0
+    answer = pausing(debugger, state(4))  # an update's pause, then Continue: moving again
+    await until(lambda: active.debugger.paused)
+    await command(sim_agent, run, "update", watches=["x"])
+    assert (await answer)["command"] == "update"
+    answer = pausing(debugger, state(4))
+    await until(lambda: active.debugger.paused)
+    await command(sim_agent, run, "continue")
+    assert (await answer)["command"] == "continue"
+    assert (await sim_agent.driver.sensors())["velocity"]["linear"] == pytest.approx(0.3)
     await call(program, "stop")  # the program stopped it itself: Continue gives nothing back
     answer = pausing(debugger, state(4))
     await until(lambda: active.debugger.paused)
@@ -275,3 +284,19 @@ async def test_blocks_that_cannot_run_fail_as_in_a_plain_run(sim_agent):
     run = await ended(run)
     log = run.log_path.read_text()
     assert run.exit_code == 1 and "not valid JSON" in log, log
+
+
+async def test_a_continue_between_an_updates_answer_and_its_pause_is_not_lost(sim_agent):
+    """The page adds a watch (update) and presses Continue before the debugger has said the
+    pause again: that pause is answered Continue, not left waiting for ever."""
+    _, run, active = await debug_run(sim_agent)
+    debugger = await connect(sim_agent, active)
+    answer = pausing(debugger, state(4))
+    await until(lambda: active.debugger.waiter is not None)
+    await command(sim_agent, run, "update", watches=["x"])
+    assert (await answer)["command"] == "update"
+    await command(sim_agent, run, "continue")  # before the debugger pauses again
+    await until(lambda: active.debugger.pending == "continue")  # the agent has it
+    answer = pausing(debugger, state(4))
+    assert (await asyncio.wait_for(answer, 10))["command"] == "continue"
+    assert not active.debugger.paused
