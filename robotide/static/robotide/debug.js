@@ -256,7 +256,9 @@
         var status = consoleBox.querySelector('#console-run[data-run="' + session.run + '"] #run-status');
         if (!status || ONGOING.indexOf(status.dataset.state) >= 0 || !live()) return;
         endWatcher.disconnect();
-        ended(status.dataset.state);
+        // The state as the status says it, in the page's language ("stopped": "parada")
+        var label = status.querySelector(".state");
+        ended(label ? label.textContent.trim() : status.dataset.state);
       }
       endWatcher = new MutationObserver(check);
       endWatcher.observe(consoleBox, {childList: true, subtree: true, attributes: true, attributeFilter: ["data-state"]});
