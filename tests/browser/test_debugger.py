@@ -385,6 +385,7 @@ COUNTING = """\
 import time
 
 i = 0
+print("counting")
 while True:
     i += 1
     time.sleep(0.05)
@@ -398,20 +399,22 @@ def test_pause_a_running_program_then_go_on(bench, appliance):
     expect(status(page)).to_have_text("Running")
     expect(command_button(page, "pause")).to_be_enabled()
     expect(command_button(page, "continue")).to_be_disabled()
+    # In its loop (a Pause before the program's first line pauses there, at line 1)
+    expect(page.locator("#console #log-lines .ln.o")).to_have_text(["counting"])
     command_button(page, "pause").click()
-    expect(status(page)).to_have_text(re.compile(r"Paused at line [4-6] \(paused\)"))
+    expect(status(page)).to_have_text(re.compile(r"Paused at line [5-7] \(paused\)"))
     count = int(variable(page, "i").locator(".var-value").inner_text())
     expect(command_button(page, "pause")).to_be_disabled()
     page.keyboard.press("F8")  # continue
     expect(status(page)).to_have_text("Running")
     # A breakpoint set while it runs: the debugger is told, and pauses there.
-    gutter(page, 5).click()
-    expect(status(page)).to_have_text("Paused at line 5 (breakpoint)")
-    gutter(page, 5).click()  # gone again (told while paused)
+    gutter(page, 6).click()
+    expect(status(page)).to_have_text("Paused at line 6 (breakpoint)")
+    gutter(page, 6).click()  # gone again (told while paused)
     page.keyboard.press("F8")
     expect(status(page)).to_have_text("Running")
     page.keyboard.press("F8")  # and pause again
-    expect(status(page)).to_have_text(re.compile(r"Paused at line [4-6] \(paused\)"))
+    expect(status(page)).to_have_text(re.compile(r"Paused at line [5-7] \(paused\)"))
     assert int(variable(page, "i").locator(".var-value").inner_text()) >= count
     command_button(page, "stop").click()
     expect(page.locator("#console #run-status")).to_have_attribute("data-state", "stopped")
