@@ -110,4 +110,5 @@ def test_a_holder_whose_lock_connection_is_cut_stops_and_its_standby_takes_over(
     assert "stopped, so that no two processes serve the same robots" in output(app, first)
     said(app, second, "robotide agent for sim-1 running", "the second taking over")
     program = app.create_program("again", "print('sim-1 served')\n")
-    assert ran(app, program, "sim-1")["state"] == "finished"
+    run = ran(app, program, "sim-1")
+    assert run["state"] == "finished", (run, output(app, second))
