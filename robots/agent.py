@@ -997,15 +997,16 @@ class RobotAgent:
     async def _heartbeat_loop(self) -> None:
         """The portal counts a robot online while this goes on (Robot.online)."""
         beat = database_sync_to_async(Robot.objects.filter(name=self.name).update)
-        await beat(
-            last_seen=timezone.now(), agent_host=socket.gethostname(), agent_started=timezone.now()
-        )
+        # Who serves the robot and since when, with the first beat that gets through
+        first = {"agent_host": socket.gethostname(), "agent_started": timezone.now()}
         while True:
-            await asyncio.sleep(settings.AGENT_HEARTBEAT)
             try:
-                await beat(last_seen=timezone.now())
-            except Exception:  # the database away for a moment must not stop the robot
+                await beat(last_seen=timezone.now(), **first)
+                first = {}
+            except Exception:  # the database away for a moment (or a SQLite table locked),
+                # even at the first beat, must not stop the robot and its programs
                 log.exception("agent %s: heartbeat failed", self.name)
+            await asyncio.sleep(settings.AGENT_HEARTBEAT)
 
 
 def flat_units(specs: dict) -> dict[str, str]:
